@@ -1,0 +1,227 @@
+"""Cells: N capsules stored as a structure of arrays.
+
+A cell is a capsule (spherocylinder): a cylinder of length ``l`` and radius ``ρ`` along the unit
+axis ``â``, capped by two hemispheres, centred at ``c``. Units are the caller's own, as long as
+they are consistent (e.g. µm, pg, s or m, kg, s); qpcontact never assumes a unit system.
+
+Generalized momentum of a cell (7 numbers): linear momentum ``p`` (3), angular momentum ``L``
+(3) and growth momentum ``g`` (1). Velocities: ``v = p/m``, ``ω = I⁻¹L``, ``l̇ = g/G``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .errors import InvalidCellsError
+
+#: Largest deviation of ``|â|`` from 1 that is accepted (and then renormalized to the last bit).
+AXIS_UNIT_TOLERANCE = 1e-6
+
+
+def _array(name: str, value: Any, n: int, tail: tuple[int, ...]) -> np.ndarray:
+    """``value`` as a float array of shape ``(n, *tail)``; scalars (and ``tail`` vectors)
+    broadcast."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise InvalidCellsError(f"{name}: cannot be read as a float array ({exc})") from None
+    shape = (n, *tail)
+    if arr.shape == shape:
+        return arr.copy()
+    if arr.ndim <= len(tail) and arr.shape == tail[len(tail) - arr.ndim :]:
+        return np.broadcast_to(arr, shape).copy()
+    raise InvalidCellsError(f"{name}: expected shape {shape} (or a broadcastable scalar), got {arr.shape}")
+
+
+def _check(name: str, arr: np.ndarray, *, allow_inf: bool = False) -> None:
+    bad = np.isnan(arr) if allow_inf else ~np.isfinite(arr)
+    if bad.any():
+        index = int(np.argwhere(bad)[0][0])
+        what = "NaN" if allow_inf else "NaN or inf"
+        raise InvalidCellsError(f"{name}: {what} at cell {index} ({int(bad.any(axis=tuple(range(1, arr.ndim))).sum())} cells)")
+
+
+def _positive(name: str, arr: np.ndarray) -> None:
+    bad = ~(arr > 0)
+    if bad.any():
+        index = int(np.flatnonzero(bad)[0])
+        raise InvalidCellsError(f"{name}: must be > 0, got {arr[index]!r} at cell {index}")
+
+
+@dataclass(frozen=True, eq=False)
+class Cells:
+    """N capsule cells as arrays (structure of arrays). Arrays are validated and copied on
+    construction; scalars broadcast to every cell.
+
+    Attributes:
+        centers: (N, 3) centre positions [length].
+        axes: (N, 3) unit axis directions. Axes within ``AXIS_UNIT_TOLERANCE`` of unit length
+            are renormalized; others are rejected unless ``normalize_axes=True`` is given to
+            the constructor, and zero axes are always rejected.
+        lengths: (N,) cylinder length ``l`` (not counting the caps), ``>= 0``; 0 is a sphere
+            [length].
+        radii: (N,) radius ``ρ > 0`` [length].
+        masses: (N,) mass ``m > 0`` [mass]; ``inf`` marks a fixed cell (never moves).
+        growth_inertia: (N,) growth inertia ``G > 0`` [mass]; ``inf`` marks a cell whose length
+            contacts cannot change (a non-growing cell).
+        momenta: (N, 3) linear momentum ``p`` [mass·length/time].
+        angular_momenta: (N, 3) angular momentum ``L`` [mass·length²/time].
+        growth_momenta: (N,) growth momentum ``g = G·l̇`` [mass·length/time].
+    """
+
+    centers: np.ndarray
+    axes: np.ndarray
+    lengths: np.ndarray
+    radii: np.ndarray
+    masses: Any = 1.0
+    growth_inertia: Any = np.inf
+    momenta: Any = 0.0
+    angular_momenta: Any = 0.0
+    growth_momenta: Any = 0.0
+    normalize_axes: dataclasses.InitVar[bool] = False
+
+    def __post_init__(self, normalize_axes: bool) -> None:
+        centers = np.asarray(self.centers, dtype=float) if not isinstance(self.centers, np.ndarray) else self.centers
+        if centers.ndim != 2 or centers.shape[1] != 3:
+            raise InvalidCellsError(f"centers: expected shape (N, 3), got {np.shape(centers)}")
+        n = centers.shape[0]
+        arrays = {
+            "centers": _array("centers", self.centers, n, (3,)),
+            "axes": _array("axes", self.axes, n, (3,)),
+            "lengths": _array("lengths", self.lengths, n, ()),
+            "radii": _array("radii", self.radii, n, ()),
+            "masses": _array("masses", self.masses, n, ()),
+            "growth_inertia": _array("growth_inertia", self.growth_inertia, n, ()),
+            "momenta": _array("momenta", self.momenta, n, (3,)),
+            "angular_momenta": _array("angular_momenta", self.angular_momenta, n, (3,)),
+            "growth_momenta": _array("growth_momenta", self.growth_momenta, n, ()),
+        }
+        for name in ("centers", "axes", "lengths", "radii", "momenta", "angular_momenta", "growth_momenta"):
+            _check(name, arrays[name])
+        for name in ("masses", "growth_inertia"):
+            _check(name, arrays[name], allow_inf=True)
+        _positive("radii", arrays["radii"])
+        _positive("masses", arrays["masses"])
+        _positive("growth_inertia", arrays["growth_inertia"])
+        negative = arrays["lengths"] < 0
+        if negative.any():
+            index = int(np.flatnonzero(negative)[0])
+            raise InvalidCellsError(f"lengths: must be >= 0, got {arrays['lengths'][index]!r} at cell {index}")
+        norms = np.linalg.norm(arrays["axes"], axis=1)
+        zero = ~(norms > 0)
+        if zero.any():
+            raise InvalidCellsError(f"axes: zero axis at cell {int(np.flatnonzero(zero)[0])}")
+        off = np.abs(norms - 1.0) > AXIS_UNIT_TOLERANCE
+        if off.any() and not normalize_axes:
+            index = int(np.flatnonzero(off)[0])
+            raise InvalidCellsError(
+                f"axes: not unit length at cell {index} (|a| = {norms[index]:.6g}); "
+                "pass normalize_axes=True to normalize them"
+            )
+        arrays["axes"] /= norms[:, None]
+        for name, arr in arrays.items():
+            arr.setflags(write=False)
+            object.__setattr__(self, name, arr)
+
+    # ----------------------------------------------------------------------------------------
+    @property
+    def n(self) -> int:
+        """Number of cells."""
+        return self.centers.shape[0]
+
+    def __len__(self) -> int:
+        return self.n
+
+    def replace(self, **changes: Any) -> "Cells":
+        """A new, validated Cells with some arrays replaced (``dataclasses.replace``)."""
+        return dataclasses.replace(self, **changes)
+
+    def subset(self, index: Any) -> "Cells":
+        """The cells selected by ``index`` (boolean mask or integer indices), in that order."""
+        return Cells(**{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)})
+
+    @property
+    def inverse_masses(self) -> np.ndarray:
+        """(N,) ``1/m`` [1/mass]; 0 for fixed cells."""
+        return 1.0 / self.masses
+
+    @property
+    def inverse_growth_inertia(self) -> np.ndarray:
+        """(N,) ``1/G`` [1/mass]; 0 for non-growing cells."""
+        return 1.0 / self.growth_inertia
+
+    @property
+    def inverse_inertia_parallel(self) -> np.ndarray:
+        """(N,) ``1/I∥ = 2/(mρ²)`` about the cell's own axis [1/(mass·length²)]."""
+        return 2.0 / (self.masses * self.radii**2)
+
+    @property
+    def inverse_inertia_perpendicular(self) -> np.ndarray:
+        """(N,) ``1/I⊥ = 12/(m(3ρ² + l²))`` about any axis normal to â [1/(mass·length²)]."""
+        return 12.0 / (self.masses * (3.0 * self.radii**2 + self.lengths**2))
+
+    def apply_inverse_inertia(self, vectors: np.ndarray) -> np.ndarray:
+        """``I⁻¹ w`` for one (N, 3) vector per cell, using the axisymmetric form
+        ``I⁻¹ = (1/I∥) ââᵀ + (1/I⊥)(Id − ââᵀ)`` (no rotation matrices)."""
+        along = np.einsum("ij,ij->i", self.axes, vectors)[:, None] * self.axes
+        return (
+            self.inverse_inertia_parallel[:, None] * along
+            + self.inverse_inertia_perpendicular[:, None] * (vectors - along)
+        )
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(N, 3) linear velocity ``v = p/m`` [length/time]."""
+        return self.inverse_masses[:, None] * self.momenta
+
+    @property
+    def angular_velocities(self) -> np.ndarray:
+        """(N, 3) angular velocity ``ω = I⁻¹L`` [1/time]."""
+        return self.apply_inverse_inertia(self.angular_momenta)
+
+    @property
+    def growth_rates(self) -> np.ndarray:
+        """(N,) length rate ``l̇ = g/G`` [length/time]."""
+        return self.inverse_growth_inertia * self.growth_momenta
+
+    def kinetic_energy(self) -> float:
+        """Total kinetic energy ``½ Σ (p²/m + L·I⁻¹L + g²/G)`` [mass·length²/time²]."""
+        return 0.5 * float(
+            np.einsum("ij,ij->", self.momenta, self.velocities)
+            + np.einsum("ij,ij->", self.angular_momenta, self.angular_velocities)
+            + np.dot(self.growth_momenta, self.growth_rates)
+        )
+
+    def generalized_momenta(self) -> np.ndarray:
+        """(N, 7) stacked ``(p, L, g)`` in the column order of ``Result.impulses``."""
+        return np.hstack([self.momenta, self.angular_momenta, self.growth_momenta[:, None]])
+
+    def with_impulses(self, impulses: np.ndarray) -> "Cells":
+        """A new Cells whose momenta are these plus the (N, 7) impulses ``(Δp, ΔL, Δg)``."""
+        impulses = np.asarray(impulses, dtype=float)
+        if impulses.shape != (self.n, 7):
+            raise InvalidCellsError(f"impulses: expected shape ({self.n}, 7), got {impulses.shape}")
+        return self.replace(
+            momenta=self.momenta + impulses[:, 0:3],
+            angular_momenta=self.angular_momenta + impulses[:, 3:6],
+            growth_momenta=self.growth_momenta + impulses[:, 6],
+        )
+
+    def point_velocities(self, cell: np.ndarray, offsets: np.ndarray, stretch: np.ndarray) -> np.ndarray:
+        """Velocity of body points (model.md): ``v + ω × r + (s/l) l̇ â``.
+
+        Args:
+            cell: (K,) cell index of each point.
+            offsets: (K, 3) offset ``r`` of the point from the cell centre [length].
+            stretch: (K,) ``s/l`` in ``[-½, ½]``: how the point rides with growth (the caps ride
+                with the tips).
+        """
+        return (
+            self.velocities[cell]
+            + np.cross(self.angular_velocities[cell], offsets)
+            + (stretch * self.growth_rates[cell])[:, None] * self.axes[cell]
+        )

@@ -1,0 +1,43 @@
+"""Exceptions raised by qpcontact.
+
+Every error a user can trigger derives from :class:`QPContactError`, and also from the builtin
+class that fits it (``ValueError`` for bad input, ``ImportError`` for a missing backend,
+``RuntimeError`` for a solver that did not deliver), so ``except ValueError`` keeps working.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+class QPContactError(Exception):
+    """Base class of every error raised by qpcontact."""
+
+
+class InvalidCellsError(QPContactError, ValueError):
+    """The cell arrays are malformed: wrong shape, NaN/inf where not allowed, non-positive radius
+    or mass, zero or non-unit axis, negative length."""
+
+
+class InvalidArgumentError(QPContactError, ValueError):
+    """An argument other than the cells is out of range (tolerance, margin, time step, ...)."""
+
+
+class UnknownSolverError(QPContactError, ValueError):
+    """The solver name is neither ``"linear"`` nor a qpsolvers backend name."""
+
+
+class SolverNotInstalledError(QPContactError, ImportError):
+    """The solver is a known qpsolvers backend, but its Python package is not installed."""
+
+
+class SolverFailedError(QPContactError, RuntimeError):
+    """The solver raised, did not converge, or returned an answer that fails the checks.
+
+    ``result`` holds the unconverged :class:`qpcontact.Result` when one could be built (its
+    ``converged`` flag is False); it is never applied to the cells.
+    """
+
+    def __init__(self, message: str, result: Any = None):
+        super().__init__(message)
+        self.result = result

@@ -1,0 +1,97 @@
+"""Error measures of model.md, all dimensionless and unit-invariant.
+
+Scaled quantities (``ỹ``, ``λ̃``, ``B̃``, ``b̃``) come from :class:`qpcontact.system.ContactSystem`;
+``max|b̃| = 1`` and the mean diagonal of ``Ã = B̃B̃ᵀ`` is 1, so velocities and impulses are both
+of order one there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .cells import Cells
+from .qp import OBJECTIVES
+from .system import ContactSystem
+
+
+def penetration(system: ContactSystem, y: np.ndarray) -> float:
+    """``max_k max(0, b_k − (Mx)_k) / max_k |b_k|``: how much the worst contact still approaches,
+    relative to the largest approach speed (0 = no contact penetrates)."""
+    gap = system.rhs - system.matrix @ y
+    return float(max(0.0, gap.max(initial=0.0)) / np.max(np.abs(system.rhs)))
+
+
+def complementarity_residual(system: ContactSystem, y: np.ndarray, lam: np.ndarray) -> float:
+    """``‖min(λ̃, B̃ỹ − b̃)‖∞``: 0 exactly when ``λ ≥ 0``, ``Mx ≥ b`` and they are complementary."""
+    slack = system.matrix @ y - system.rhs
+    return float(np.max(np.abs(np.minimum(lam, slack)), initial=0.0))
+
+
+def multiplier_consistency(system: ContactSystem, y: np.ndarray, lam: np.ndarray) -> float:
+    """``‖ỹ − B̃ᵀλ̃‖ / ‖ỹ‖``: how far the impulses are from equal and opposite contact impulses."""
+    norm = float(np.linalg.norm(y))
+    return float(np.linalg.norm(y - system.matrix.T @ lam)) / norm if norm > 0 else 0.0
+
+
+def distance(y: np.ndarray, reference: np.ndarray) -> float:
+    """``‖x − x*‖_W / ‖x*‖_W`` (``= ‖ỹ − ỹ*‖/‖ỹ*‖`` in the scaled unknowns)."""
+    norm = float(np.linalg.norm(reference))
+    diff = float(np.linalg.norm(y - reference))
+    return diff / norm if norm > 0 else diff
+
+
+def objective_gap(system: ContactSystem, formulation: str, y: np.ndarray, reference: np.ndarray) -> float:
+    """``|f(ỹ) − f(ỹ*)| / (½‖b̃‖²)`` for the formulation's objective f."""
+    f = OBJECTIVES[formulation]
+    return abs(f(system, y) - f(system, reference)) / (0.5 * float(system.rhs @ system.rhs))
+
+
+def physics(cells: Cells, system: ContactSystem, impulses: np.ndarray, contact_impulses: np.ndarray | None) -> dict[str, float]:
+    """Momentum and energy checks of physical impulses.
+
+    Returns:
+        ``momentum_change``: ``|ΣΔp + reactions| / Σ|λ|`` where reactions are the impulses taken
+            by immovable bodies (planes, fixed cells) through the contact impulses λ; 0 for
+            equal and opposite contact impulses.
+        ``angular_momentum_change``: the same for angular momentum about the centroid of the
+            contact points, relative to ``Σ|λ|·R`` (R = largest lever arm).
+        ``energy_change``: ``ΔKE = xᵀWp + ½xᵀWx`` [energy], computed without cancellation.
+        ``energy_change_relative``: ``ΔKE / (½xᵀWx)``; ≤ 0 for inelastic contact (−1 when every
+            contact is active and exactly stopped).
+    """
+    contacts = system.contacts
+    touched = np.unique(system.column_cell)
+    dp, dl = impulses[touched, 0:3], impulses[touched, 3:6]
+    centres = cells.centers[touched]
+    points = cells.centers[contacts.cell_a] + contacts.offset_a
+    origin = points.mean(axis=0) if len(points) else np.zeros(3)
+    linear = dp.sum(axis=0)
+    angular = (np.cross(centres - origin, dp) + dl).sum(axis=0)
+    total_lambda = 0.0
+    if contact_impulses is not None and len(contact_impulses):
+        lam = contact_impulses
+        total_lambda = float(np.abs(lam).sum())
+        # Immovable sides (a static body or a fixed cell) take the reaction of their contacts.
+        fixed_a = ~np.isfinite(cells.masses[contacts.cell_a])
+        fixed_b = (contacts.cell_b < 0) | ~np.isfinite(cells.masses[np.maximum(contacts.cell_b, 0)])
+        sign = fixed_a * 1.0 - fixed_b * 1.0
+        reaction = (sign * lam)[:, None] * contacts.normal
+        linear = linear + reaction.sum(axis=0)
+        angular = angular + np.cross(points - origin, reaction).sum(axis=0)
+    lever = float(np.max(np.linalg.norm(np.vstack([points, centres]) - origin, axis=1), initial=0.0))
+    momentum_scale = total_lambda if total_lambda > 0 else float(np.abs(dp).sum()) or 1.0
+    angular_scale = momentum_scale * (lever if lever > 0 else 1.0)
+
+    velocities = np.hstack([cells.velocities, cells.angular_velocities, cells.growth_rates[:, None]])
+    work = float(np.einsum("ij,ij->", impulses[touched], velocities[touched]))
+    own = 0.5 * float(
+        np.einsum("ij,ij->", dp, cells.inverse_masses[touched, None] * dp)
+        + np.einsum("ij,ij->", dl, cells.subset(touched).apply_inverse_inertia(dl))
+        + np.dot(impulses[touched, 6] ** 2, cells.inverse_growth_inertia[touched])
+    )
+    return {
+        "momentum_change": float(np.linalg.norm(linear)) / momentum_scale,
+        "angular_momentum_change": float(np.linalg.norm(angular)) / angular_scale,
+        "energy_change": work + own,
+        "energy_change_relative": (work + own) / own if own > 0 else 0.0,
+    }

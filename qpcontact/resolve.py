@@ -1,0 +1,255 @@
+"""One call per timestep: :func:`resolve` finds the colliding contacts of a scene, builds the
+system, solves it and returns the impulses with diagnostics."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from . import metrics
+from .cells import Cells
+from .contacts import Contacts, colliding, find_contacts
+from .errors import InvalidArgumentError, SolverFailedError
+from .linear import solve_min_norm
+from .qp import FORMS, FORMULATIONS, check_solver, solve_qp_system
+from .system import ContactSystem, build_system
+
+#: Default form per formulation (see qpcontact.qp; chosen from docs/solvers.md measurements).
+DEFAULT_FORM = {"complementarity": "primal", "least_squares": "primal"}
+#: A QP answer is accepted when its penetration is at most this many times the tolerance.
+ACCEPT_FACTOR = 100.0
+
+
+@dataclass
+class Result:
+    """The outcome of one :func:`resolve` call.
+
+    Attributes:
+        impulses: (N, 7) ``(Δp_x, Δp_y, Δp_z, ΔL_x, ΔL_y, ΔL_z, Δg)`` per cell; zeros for cells
+            left out [momentum units].
+        cells: the cells with the impulses applied (the input cells, unchanged, when the result
+            is not converged).
+        contacts: the colliding contacts that entered the system (row order).
+        contact_impulses: (K,) normal impulse ``λ_k`` at each colliding contact [momentum], or
+            None where the solver gives none.
+        solver, formulation, form: what was solved and how.
+        converged: the solver reported success and the answer passed the checks.
+        status: the solver's own status text (``"no_contact"`` when nothing collided).
+        iterations: solver iterations where known.
+        times: seconds per phase: ``detect``, ``assemble``, ``setup``, ``solve``, ``check``,
+            ``total``.
+        errors: dimensionless error measures (see :mod:`qpcontact.metrics`): ``penetration``,
+            ``complementarity`` (complementarity formulation), ``multiplier_consistency``,
+            ``momentum_change``, ``angular_momentum_change``, ``energy_change``,
+            ``energy_change_relative``.
+        n_unknowns: columns of the reduced system.
+        planar: whether the planar reduction was used.
+        condition_estimate: ``cond₁`` of the scaled Delassus operator, when estimated.
+        message: why the result is not converged, if it is not.
+        system: the assembled system (None when nothing collided).
+        scaled_solution: the scaled unknowns ``ỹ`` (for comparisons).
+    """
+
+    impulses: np.ndarray
+    cells: Cells
+    contacts: Contacts
+    contact_impulses: np.ndarray | None
+    solver: str
+    formulation: str
+    form: str
+    converged: bool
+    status: str
+    iterations: int | None
+    times: dict[str, float]
+    errors: dict[str, float]
+    n_unknowns: int
+    planar: bool
+    condition_estimate: float | None = None
+    message: str = ""
+    system: ContactSystem | None = field(default=None, repr=False)
+    scaled_solution: np.ndarray | None = field(default=None, repr=False)
+
+    def summary(self) -> str:
+        """One line: solver, status, contacts, unknowns, time, penetration."""
+        return (
+            f"{self.solver}/{self.formulation}: {self.status} ({'converged' if self.converged else 'NOT converged'}), "
+            f"{len(self.contacts)} contacts, {self.n_unknowns} unknowns, {self.times.get('total', 0.0) * 1e3:.2f} ms, "
+            f"penetration {self.errors.get('penetration', 0.0):.2e}"
+        )
+
+
+def _check_options(solver: str, formulation: str, form: str, tolerance: float, time_limit: float | None, on_failure: str) -> None:
+    check_solver(solver)
+    if formulation not in FORMULATIONS:
+        raise InvalidArgumentError(f"formulation: expected one of {FORMULATIONS}, got {formulation!r}")
+    if form not in (*FORMS, "auto"):
+        raise InvalidArgumentError(f"form: expected 'auto' or one of {FORMS}, got {form!r}")
+    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
+        raise InvalidArgumentError(f"tolerance: must be in (0, 1), got {tolerance!r}")
+    if time_limit is not None and not time_limit > 0:
+        raise InvalidArgumentError(f"time_limit: must be > 0 seconds, got {time_limit!r}")
+    if on_failure not in ("raise", "return"):
+        raise InvalidArgumentError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
+
+
+def solve_system(
+    system: ContactSystem,
+    cells: Cells,
+    *,
+    solver: str = "clarabel",
+    formulation: str = "complementarity",
+    form: str = "auto",
+    tolerance: float = 1e-6,
+    time_limit: float | None = None,
+    regularization: float = 0.0,
+    solver_settings: dict[str, Any] | None = None,
+    estimate_condition: bool = False,
+) -> tuple[np.ndarray | None, np.ndarray | None, dict[str, Any]]:
+    """Solve an assembled system. Returns ``(ỹ, λ̃, info)``; ``info`` has ``converged``,
+    ``status``, ``iterations``, ``setup``, ``solve``, ``message``, ``condition_estimate``,
+    ``form``. Used by :func:`resolve` and by the benchmarks (which assemble once and solve many
+    times)."""
+    form = DEFAULT_FORM[formulation] if form == "auto" else form
+    info: dict[str, Any] = {"form": form, "condition_estimate": None, "message": ""}
+    if solver == "linear":
+        t0 = time.perf_counter()
+        try:
+            # The optimality check is relative; 1e-2·tolerance keeps it tighter than the QPs'.
+            lin = solve_min_norm(system.matrix, system.rhs, tol=max(min(tolerance, 1e-6) * 1e-2, 1e-12),
+                                 estimate_condition=estimate_condition)
+        except SolverFailedError as exc:
+            info.update(converged=False, status="failed", iterations=None, setup=0.0,
+                        solve=time.perf_counter() - t0, message=str(exc))
+            return None, None, info
+        info.update(converged=True, status=f"solved ({lin.method}{'' if lin.consistent else ', least squares'})",
+                    iterations=lin.iterations, setup=0.0, solve=lin.seconds, condition_estimate=lin.condition_estimate)
+        return lin.y, lin.lam, info
+    out = solve_qp_system(system, solver, formulation, form, tolerance=tolerance, time_limit=time_limit,
+                          regularization=regularization, settings=solver_settings)
+    info.update(status=out.status, iterations=out.iterations, setup=out.setup_seconds, solve=out.solve_seconds)
+    if out.y is None:
+        info.update(converged=False, message=out.error or f"{solver} returned no solution (status {out.status})")
+    elif not out.found:
+        info.update(converged=False, message=f"{solver} did not converge (status {out.status})")
+    else:
+        pen = metrics.penetration(system, out.y)
+        limit = ACCEPT_FACTOR * tolerance
+        ok = pen <= limit
+        info.update(converged=ok, message="" if ok else
+                    f"{solver} reported success but the answer penetrates by {pen:.3g} (> {limit:.3g} = {ACCEPT_FACTOR:g}·tolerance)")
+    if estimate_condition:
+        info["condition_estimate"] = solve_min_norm(system.matrix, system.rhs, method="auto", estimate_condition=True).condition_estimate
+    return out.y, out.lam, info
+
+
+def resolve(
+    cells: Cells,
+    *,
+    solver: str = "clarabel",
+    formulation: str = "complementarity",
+    form: str = "auto",
+    tolerance: float = 1e-6,
+    margin: float = 0.0,
+    position_correction: float = 0.0,
+    dt: float | None = None,
+    contacts: Contacts | None = None,
+    reduce: bool = True,
+    planar: bool | None = None,
+    time_limit: float | None = None,
+    regularization: float = 0.0,
+    solver_settings: dict[str, Any] | None = None,
+    estimate_condition: bool = False,
+    on_failure: str = "raise",
+) -> Result:
+    """Resolve the contacts of one timestep.
+
+    Args:
+        cells: the scene (positions, shapes, masses, momenta before contact).
+        solver: ``"linear"`` (plain minimum-W-norm solve of ``Mx = b``) or an installed qpsolvers
+            backend (``"clarabel"``, ``"osqp"``, ...; see :func:`qpcontact.available_solvers`).
+        formulation: ``"complementarity"`` (impulses only push; default) or ``"least_squares"``.
+            Ignored by ``solver="linear"``.
+        form: ``"primal"``, ``"contact"`` or ``"auto"`` (see :mod:`qpcontact.qp`).
+        tolerance: relative tolerance handed to the solver (dimensionless: the problem is scaled
+            so that ``max b = 1``).
+        margin: contacts closer than this also count [length].
+        position_correction: β in ``b = −u + β·max(0, −d)/dt`` (0 = off); needs ``dt``.
+        dt: the time step [time], for position correction.
+        contacts: precomputed contacts (e.g. cell–cell plus cell–plane); found from ``cells`` if
+            None.
+        reduce: leave out unknowns the scene does not need (default True).
+        planar: force (True) or forbid (False) the planar reduction; None detects it.
+        time_limit: seconds the solver may take, where the backend supports it.
+        regularization: ε of the least_squares formulation (dimensionless; default 0 = the exact
+            minimum-W-norm selection).
+        solver_settings: extra backend options, passed through to qpsolvers.
+        estimate_condition: also estimate the condition number of the scaled Delassus operator.
+        on_failure: ``"raise"`` a :class:`~qpcontact.errors.SolverFailedError` (default), or
+            ``"return"`` the unconverged result (with ``cells`` unchanged).
+
+    Returns:
+        A :class:`Result`.
+
+    Raises:
+        InvalidArgumentError, UnknownSolverError, SolverNotInstalledError: bad arguments.
+        SolverFailedError: the solver failed, did not converge, or its answer fails the checks.
+    """
+    _check_options(solver, formulation, form, tolerance, time_limit, on_failure)
+    t_start = time.perf_counter()
+    if contacts is None:
+        contacts = find_contacts(cells, margin, planar=bool(planar))
+    active, b = colliding(contacts, position_correction=position_correction, dt=dt)
+    t_detect = time.perf_counter()
+    n_cells = cells.n
+    if len(active) == 0:  # nothing to solve: never hand an unconstrained QP to a backend
+        return Result(np.zeros((n_cells, 7)), cells, active, np.zeros(0), solver, formulation,
+                      DEFAULT_FORM[formulation] if form == "auto" else form, True, "no_contact", 0,
+                      {"detect": t_detect - t_start, "assemble": 0.0, "setup": 0.0, "solve": 0.0, "check": 0.0,
+                       "total": time.perf_counter() - t_start}, {"penetration": 0.0}, 0, bool(planar))
+    system = build_system(cells, active, b, reduce=reduce, planar=planar)
+    t_assemble = time.perf_counter()
+    y, lam, info = solve_system(system, cells, solver=solver, formulation=formulation, form=form, tolerance=tolerance,
+                                time_limit=time_limit, regularization=regularization, solver_settings=solver_settings,
+                                estimate_condition=estimate_condition)
+    t_solve = time.perf_counter()
+    errors: dict[str, float] = {}
+    impulses = np.zeros((n_cells, 7))
+    contact_impulses = None
+    if y is not None:
+        impulses = system.to_impulses(y)
+        contact_impulses = system.to_contact_impulses(lam) if lam is not None else None
+        errors["penetration"] = metrics.penetration(system, y)
+        if lam is not None:
+            errors["multiplier_consistency"] = metrics.multiplier_consistency(system, y, lam)
+            if formulation == "complementarity" and solver != "linear":
+                errors["complementarity"] = metrics.complementarity_residual(system, y, lam)
+        errors.update(metrics.physics(cells, system, impulses, contact_impulses))
+    t_check = time.perf_counter()
+    converged = bool(info["converged"])
+    result = Result(
+        impulses=impulses,
+        cells=cells.with_impulses(impulses) if converged else cells,
+        contacts=active,
+        contact_impulses=contact_impulses,
+        solver=solver,
+        formulation="linear" if solver == "linear" else formulation,
+        form="contact" if solver == "linear" else info["form"],
+        converged=converged,
+        status=info["status"],
+        iterations=info["iterations"],
+        times={"detect": t_detect - t_start, "assemble": t_assemble - t_detect, "setup": info["setup"],
+               "solve": info["solve"], "check": t_check - t_solve, "total": t_check - t_start},
+        errors=errors,
+        n_unknowns=system.shape[1],
+        planar=system.planar,
+        condition_estimate=info["condition_estimate"],
+        message=info["message"],
+        system=system,
+        scaled_solution=y,
+    )
+    if not converged and on_failure == "raise":
+        raise SolverFailedError(f"{solver}/{formulation}: {info['message']}", result)
+    return result

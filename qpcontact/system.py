@@ -1,0 +1,249 @@
+"""The contact system: sparse ``M``, right-hand side ``b``, metric ``W``, reduced and scaled.
+
+Row k of ``M`` is ``nᵀM_{r_a}`` in a's columns and ``−nᵀM_{r_b}`` in b's, so ``(M x)_k`` is the
+change of relative normal velocity at contact k for stacked impulses ``x``. ``M = J W``, with
+``W`` the inverse generalized mass and ``J`` the contact Jacobian (``nᵀ``, ``(r × n)ᵀ``,
+``(s/l)(â·n)`` per side).
+
+Unknowns (model.md, "Leaving out what a scene does not need"): each cell has seven *slots* in
+its body frame, translation along x, y, z; rotation about â, e₁, e₂ (e₁, e₂ ⊥ â); growth. In
+this basis ``W`` is diagonal (``1/m``, ``1/I∥``, ``1/I⊥``, ``1/I⊥``, ``1/G``). A slot becomes a
+column only when the scene needs it: the cell is in a colliding contact and not fixed; never the
+spin about â (its column of M is zero); rotation only for rods (l > 0); growth only for finite
+G; in a planar scene (axes and normals in the xy-plane) only x, y, rotation about z and growth.
+
+Scaling (unit invariance): the solvers see ``B̃ ỹ ≥ b̃`` with the mass-weighted unknowns
+``y = W^{1/2} x`` (so the kinetic-energy metric becomes Euclidean and ``‖x‖_W = ‖y‖``),
+``B̃ = J W^{1/2} / σ_B`` and ``b̃ = b / σ_b``, where ``σ_b = max|b|`` [length/time] and
+``σ_B² = mean diag(J W Jᵀ)`` [1/mass] (mean effective inverse mass of a contact). Both are
+dimensionless: a scene in µm/pg and in m/kg gives the same ``B̃``, ``b̃``, and ``ỹ``.
+Physical impulses are ``x = W^{-1/2} ỹ σ_b/σ_B``; contact impulses ``λ = λ̃ σ_b/σ_B²``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .cells import Cells
+from .contacts import Contacts
+from .errors import InvalidArgumentError
+
+#: Slots of a cell, in order. Their world-frame directions come from :func:`slot_basis`.
+SLOTS = ("tx", "ty", "tz", "spin", "roll1", "roll2", "growth")
+#: Axes and normals with |z| below this count as lying in the xy-plane.
+PLANAR_TOLERANCE = 1e-12
+
+
+def perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors e₁, e₂ with (â, e₁, e₂) right-handed orthonormal. For â in the xy-plane,
+    e₂ = −ẑ, so a planar scene keeps only e₂."""
+    ref = np.zeros_like(axes)
+    near_z = np.abs(axes[:, 2]) > 0.9
+    ref[~near_z, 2] = 1.0
+    ref[near_z, 0] = 1.0
+    e1 = np.cross(axes, ref)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    return e1, np.cross(axes, e1)
+
+
+def slot_basis(cells: Cells, index: np.ndarray) -> np.ndarray:
+    """(len(index), 7, 7): row j is slot j's direction in the world (Δp, ΔL, Δg) space."""
+    n = index.size
+    axes = cells.axes[index]
+    e1, e2 = perpendicular_basis(axes)
+    basis = np.zeros((n, 7, 7))
+    basis[:, 0:3, 0:3] = np.eye(3)
+    basis[:, 3, 3:6] = axes
+    basis[:, 4, 3:6] = e1
+    basis[:, 5, 3:6] = e2
+    basis[:, 6, 6] = 1.0
+    return basis
+
+
+def slot_inverse_mass(cells: Cells, index: np.ndarray) -> np.ndarray:
+    """(len(index), 7) the diagonal of W in the slot basis (0 for a fixed or non-growing cell)."""
+    inv_m = cells.inverse_masses[index]
+    inv_perp = cells.inverse_inertia_perpendicular[index]
+    return np.stack([
+        inv_m, inv_m, inv_m, cells.inverse_inertia_parallel[index], inv_perp, inv_perp,
+        cells.inverse_growth_inertia[index],
+    ], axis=1)
+
+
+def is_planar(cells: Cells, contacts: Contacts) -> bool:
+    """True when every contact normal and every contacting cell's axis lie in the xy-plane."""
+    cells_in = np.concatenate([contacts.cell_a, contacts.cell_b[contacts.cell_b >= 0]])
+    return bool(
+        np.all(np.abs(contacts.normal[:, 2]) <= PLANAR_TOLERANCE)
+        and np.all(np.abs(cells.axes[cells_in, 2]) <= PLANAR_TOLERANCE)
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class ContactSystem:
+    """The scaled, reduced system handed to the solvers (see the module docstring).
+
+    Attributes:
+        matrix: (K, n) sparse CSR ``B̃ = J W^{1/2}/σ_B`` (dimensionless).
+        rhs: (K,) ``b̃ = b/σ_b`` (dimensionless, max 1).
+        b: (K,) ``b`` [length/time], the required change of normal velocity.
+        velocity_scale: ``σ_b`` [length/time].
+        operator_scale: ``σ_B`` [1/sqrt(mass)].
+        column_cell: (n,) the cell each column belongs to.
+        column_slot: (n,) the slot (index into ``SLOTS``) of each column.
+        column_basis: (n, 7) the column's direction in its cell's world (Δp, ΔL, Δg) space.
+        column_inverse_mass: (n,) the diagonal of W for each column.
+        n_cells: number of cells in the scene.
+        planar: whether the planar reduction was used.
+        contacts: the K colliding contacts, in row order.
+    """
+
+    matrix: sp.csr_matrix
+    rhs: np.ndarray
+    b: np.ndarray
+    velocity_scale: float
+    operator_scale: float
+    column_cell: np.ndarray
+    column_slot: np.ndarray
+    column_basis: np.ndarray
+    column_inverse_mass: np.ndarray
+    n_cells: int
+    planar: bool
+    contacts: Contacts
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(K, n)``: contact rows, unknowns."""
+        return self.matrix.shape
+
+    def delassus(self) -> sp.csc_matrix:
+        """The scaled Delassus operator ``Ã = B̃ B̃ᵀ`` (K × K, symmetric positive semidefinite)."""
+        return (self.matrix @ self.matrix.T).tocsc()
+
+    def to_impulses(self, y: np.ndarray) -> np.ndarray:
+        """(N, 7) physical impulses ``(Δp, ΔL, Δg)`` from scaled unknowns ``ỹ``."""
+        w = self.column_inverse_mass
+        x = np.zeros_like(y)
+        pos = w > 0
+        x[pos] = y[pos] / np.sqrt(w[pos]) * (self.velocity_scale / self.operator_scale)
+        out = np.zeros((self.n_cells, 7))
+        contributions = x[:, None] * self.column_basis
+        for j in range(7):  # seven bincounts over the columns (not a loop over cells)
+            out[:, j] = np.bincount(self.column_cell, weights=contributions[:, j], minlength=self.n_cells)
+        return out
+
+    def to_contact_impulses(self, lam: np.ndarray) -> np.ndarray:
+        """Physical contact impulses ``λ`` [mass·length/time] from scaled ``λ̃``."""
+        return lam * self.velocity_scale / self.operator_scale**2
+
+    def from_impulses(self, impulses: np.ndarray) -> np.ndarray:
+        """Scaled unknowns ``ỹ`` for (N, 7) impulses (the part that lies in the columns)."""
+        x = np.einsum("ij,ij->i", impulses[self.column_cell], self.column_basis)
+        return x * np.sqrt(self.column_inverse_mass) * (self.operator_scale / self.velocity_scale)
+
+
+def contact_jacobian(contacts: Contacts, cells: Cells, side: str) -> np.ndarray:
+    """(K, 7) one side of J in the slot basis of its cell (without the ± sign):
+    ``[nᵀ, (r × n)·â, (r × n)·e₁, (r × n)·e₂, (s/l)(â·n)]``."""
+    cell = contacts.cell_a if side == "a" else contacts.cell_b
+    offset = contacts.offset_a if side == "a" else contacts.offset_b
+    stretch = contacts.stretch_a if side == "a" else contacts.stretch_b
+    n = contacts.normal
+    moment = np.cross(offset, n)
+    axes = cells.axes[cell]
+    e1, e2 = perpendicular_basis(axes)
+    dot = lambda u, v: np.einsum("ij,ij->i", u, v)  # noqa: E731
+    return np.column_stack([n, dot(moment, axes), dot(moment, e1), dot(moment, e2), stretch * dot(axes, n)])
+
+
+def build_system(
+    cells: Cells, contacts: Contacts, b: np.ndarray, *, reduce: bool = True, planar: bool | None = None
+) -> ContactSystem:
+    """Assemble the scaled system for the colliding ``contacts`` with right-hand side ``b``.
+
+    Args:
+        cells: the scene.
+        contacts: the colliding contacts (see :func:`qpcontact.contacts.colliding`).
+        b: (K,) required change of normal velocity, > 0 [length/time].
+        reduce: leave out the unknowns the scene does not need (default). ``False`` keeps all
+            seven slots of every cell (for tests: the answer must not change).
+        planar: use the planar reduction; ``None`` detects it (:func:`is_planar`). ``True`` on a
+            scene that is not planar raises.
+    """
+    k = len(contacts)
+    if b.shape != (k,):
+        raise InvalidArgumentError(f"b: expected shape ({k},), got {b.shape}")
+    if k == 0:
+        raise InvalidArgumentError("build_system: no colliding contact (nothing to solve)")
+    detected = is_planar(cells, contacts)
+    if planar is None:
+        planar = detected
+    elif planar and not detected:
+        raise InvalidArgumentError("planar=True, but some contact normal or axis leaves the xy-plane")
+    planar = bool(planar and reduce)
+
+    sides = [(contacts.cell_a, 1.0, "a"), (contacts.cell_b, -1.0, "b")]
+    # Which cells get columns, and which of their seven slots.
+    if reduce:
+        involved = np.unique(np.concatenate([contacts.cell_a, contacts.cell_b]))
+        involved = involved[(involved >= 0)]
+        involved = involved[np.isfinite(cells.masses[involved])]
+    else:
+        involved = np.arange(cells.n)
+    used = np.ones((involved.size, 7), dtype=bool)
+    if reduce:
+        used[:, 3] = False  # spin about the own axis never changes a normal velocity
+        rod = cells.lengths[involved] > 0
+        used[:, 4] &= rod
+        used[:, 5] &= rod
+        used[:, 6] = np.isfinite(cells.growth_inertia[involved])
+        if planar:
+            used[:, 2] = False  # tz
+            used[:, 4] = False  # roll1 lies in the plane; roll2 = -z is kept
+    column_of = np.full((cells.n, 7), -1, dtype=np.intp)
+    column_of[involved] = np.where(used, np.cumsum(used).reshape(used.shape) - 1, -1)
+    n_cols = int(used.sum())
+
+    sqrt_w = np.sqrt(slot_inverse_mass(cells, np.arange(cells.n)))
+    rows, cols, vals = [], [], []
+    for cell, sign, side in sides:
+        valid = cell >= 0
+        jac = contact_jacobian(contacts.subset(valid), cells, side) * sign
+        c = cell[valid]
+        col = column_of[c]
+        entry = jac * sqrt_w[c]
+        keep = col >= 0
+        rows.append(np.broadcast_to(np.flatnonzero(valid)[:, None], col.shape)[keep])
+        cols.append(col[keep])
+        vals.append(entry[keep])
+    rows_a, cols_a, vals_a = (np.concatenate(x) for x in (rows, cols, vals))
+    raw = sp.csr_matrix((vals_a, (rows_a, cols_a)), shape=(k, n_cols))
+    diag = np.asarray(raw.multiply(raw).sum(axis=1)).ravel()
+    if not np.all(diag > 0):
+        bad = int(np.flatnonzero(~(diag > 0))[0])
+        raise InvalidArgumentError(
+            f"contact {bad} (cells {contacts.cell_a[bad]}, {contacts.cell_b[bad]}) has no movable degree of freedom"
+        )
+    operator_scale = float(np.sqrt(diag.mean()))
+    velocity_scale = float(np.max(np.abs(b)))
+    col_cell, col_slot = np.nonzero(column_of >= 0)
+    order = np.argsort(column_of[col_cell, col_slot])
+    col_cell, col_slot = col_cell[order], col_slot[order]
+    basis = slot_basis(cells, col_cell)[np.arange(n_cols), col_slot]
+    return ContactSystem(
+        matrix=(raw / operator_scale).tocsr(),
+        rhs=b / velocity_scale,
+        b=np.asarray(b, dtype=float),
+        velocity_scale=velocity_scale,
+        operator_scale=operator_scale,
+        column_cell=col_cell,
+        column_slot=col_slot,
+        column_inverse_mass=slot_inverse_mass(cells, col_cell)[np.arange(n_cols), col_slot],
+        column_basis=basis,
+        n_cells=cells.n,
+        planar=planar,
+        contacts=contacts,
+    )

@@ -1,0 +1,87 @@
+"""Checks of a result against the plain linear solve, and high-accuracy reference solutions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import metrics
+from .linear import LinearSolution, solve_min_norm
+from .qp import solve_qp_system
+from .resolve import Result
+from .system import ContactSystem
+
+#: Contact impulses below this (scaled) count as inactive in the linear solve.
+ACTIVE_THRESHOLD = 1e-9
+
+
+@dataclass
+class Agreement:
+    """How a result compares with the plain linear solve of the same system.
+
+    Attributes:
+        all_active: every contact is active in the linear solve, so the formulation's answer
+            must equal it: for complementarity every ``λ_k > 0``; for least_squares ``Mx = b``
+            is consistent.
+        distance: ``‖x − x_lin‖_W / ‖x_lin‖_W``.
+        max_difference: largest impulse component difference relative to the largest linear
+            impulse component.
+        inactive: number of contacts with ``λ_k ≤ 0`` in the linear solve (pulling impulses).
+        agrees: ``all_active`` and ``distance <= tolerance``; None when not all active (then
+            the two legitimately differ and only the difference is reported).
+    """
+
+    all_active: bool
+    distance: float
+    max_difference: float
+    inactive: int
+    agrees: bool | None
+
+
+def compare_with_linear(result: Result, *, tolerance: float = 1e-5, linear: LinearSolution | None = None) -> Agreement:
+    """Compare a converged QP result with the plain linear solve of the same system."""
+    system = result.system
+    if system is None or result.scaled_solution is None:
+        return Agreement(True, 0.0, 0.0, 0, True if system is None else None)
+    lin = linear or solve_min_norm(system.matrix, system.rhs)
+    lam_scale = max(float(np.max(np.abs(lin.lam), initial=0.0)), 1e-300)
+    inactive = int(np.sum(lin.lam <= ACTIVE_THRESHOLD * lam_scale))
+    if result.formulation == "least_squares":
+        all_active = lin.consistent
+    else:
+        all_active = lin.consistent and inactive == 0
+    dist = metrics.distance(result.scaled_solution, lin.y)
+    imp_lin = system.to_impulses(lin.y)
+    max_diff = float(np.max(np.abs(result.impulses - imp_lin))) / max(float(np.max(np.abs(imp_lin))), 1e-300)
+    return Agreement(all_active, dist, max_diff, inactive, (dist <= tolerance) if all_active else None)
+
+
+def reference_solution(system: ContactSystem, formulation: str, *, tolerance: float = 1e-10) -> np.ndarray:
+    """A high-accuracy ``ỹ*`` for a formulation: the linear solve when it already satisfies the
+    formulation's optimality conditions (all contacts active), else Clarabel at ``tolerance``
+    followed by an exact active-set polish that is kept only if it verifies (feasible, and for
+    complementarity, non-negative contact impulses)."""
+    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-12)
+    if formulation == "least_squares" and lin.consistent:
+        return lin.y
+    if formulation == "complementarity" and lin.consistent and np.all(lin.lam > 0):
+        return lin.y
+    out = solve_qp_system(system, "clarabel", formulation, "primal" if formulation == "complementarity" else "contact",
+                          tolerance=tolerance)
+    if out.y is None:
+        raise RuntimeError(f"reference solve failed: {out.status} {out.error or ''}")
+    y = out.y
+    if formulation != "complementarity" or out.lam is None:
+        return y  # least_squares: Clarabel's answer (its r ≥ 0 part has no simple active-set polish)
+    active = out.lam > np.sqrt(tolerance) * max(float(out.lam.max(initial=0.0)), 1e-300)
+    if active.any():
+        try:
+            polished = solve_min_norm(system.matrix[active], system.rhs[active], tol=1e-12)
+        except Exception:
+            return y
+        feasible = np.all(system.matrix @ polished.y - system.rhs >= -1e-12)
+        pushes = np.all(polished.lam >= -1e-12)
+        if feasible and pushes:
+            return polished.y
+    return y
