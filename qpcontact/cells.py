@@ -52,6 +52,18 @@ def _positive(name: str, arr: np.ndarray) -> None:
         raise InvalidCellsError(f"{name}: must be > 0, got {arr[index]!r} at cell {index}")
 
 
+def perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit vectors e₁, e₂ with (â, e₁, e₂) right-handed orthonormal. For â in the xy-plane,
+    e₂ = −ẑ, so a planar scene keeps only e₂."""
+    ref = np.zeros_like(axes)
+    near_z = np.abs(axes[:, 2]) > 0.9
+    ref[~near_z, 2] = 1.0
+    ref[near_z, 0] = 1.0
+    e1 = np.cross(axes, ref)
+    e1 /= np.linalg.norm(e1, axis=1)[:, None]
+    return e1, np.cross(axes, e1)
+
+
 @dataclass(frozen=True, eq=False)
 class Cells:
     """N capsule cells as arrays (structure of arrays). Arrays are validated and copied on
@@ -65,7 +77,8 @@ class Cells:
         lengths: (N,) cylinder length ``l`` (not counting the caps), ``>= 0``; 0 is a sphere
             [length].
         radii: (N,) radius ``ρ > 0`` [length].
-        masses: (N,) mass ``m > 0`` [mass]; ``inf`` marks a fixed cell (never moves).
+        masses: (N,) mass ``m > 0`` [mass]; ``inf`` marks a fixed cell: it neither moves, turns
+            nor changes length (its growth inertia counts as infinite too).
         growth_inertia: (N,) growth inertia ``G > 0`` [mass]; ``inf`` marks a cell whose length
             contacts cannot change (a non-growing cell).
         momenta: (N, 3) linear momentum ``p`` [mass·length/time].
@@ -123,8 +136,9 @@ class Cells:
                 "pass normalize_axes=True to normalize them"
             )
         arrays["axes"] /= norms[:, None]
+        # Arrays are private copies (the caller's inputs are never aliased); they stay writeable
+        # so that libraries needing writable buffers accept them.
         for name, arr in arrays.items():
-            arr.setflags(write=False)
             object.__setattr__(self, name, arr)
 
     # ----------------------------------------------------------------------------------------
@@ -151,8 +165,8 @@ class Cells:
 
     @property
     def inverse_growth_inertia(self) -> np.ndarray:
-        """(N,) ``1/G`` [1/mass]; 0 for non-growing cells."""
-        return 1.0 / self.growth_inertia
+        """(N,) ``1/G`` [1/mass]; 0 for non-growing and for fixed cells."""
+        return np.where(np.isfinite(self.masses), 1.0 / self.growth_inertia, 0.0)
 
     @property
     def inverse_inertia_parallel(self) -> np.ndarray:

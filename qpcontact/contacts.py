@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .cells import Cells
+from .cells import Cells, perpendicular_basis
 from .errors import InvalidArgumentError
 
 #: Pairs whose axes make an angle with sine below this get two contacts (ends of the overlap).
@@ -152,9 +152,11 @@ def _closest_parameters(e, f, k, ha, hb):
 
 
 def _fallback_normals(cells: Cells, a: np.ndarray, b: np.ndarray, planar: bool) -> np.ndarray:
-    """Normals for pairs whose axis closest points coincide (crossing axes): ``â × b̂``, else the
-    centre difference, else x̂ (in a planar scene ``â × b̂`` leaves the plane and is skipped).
-    Oriented so that ``n·(c_a − c_b) >= 0``."""
+    """Normals for pairs whose axis closest points coincide (crossing or coincident axes):
+    ``â × b̂``, else the centre difference, else a fixed axis normal to ``â`` (``e₁`` of
+    :func:`qpcontact.cells.perpendicular_basis`, which lies in the plane for planar scenes).
+    In a planar scene ``â × b̂`` leaves the plane and is skipped. Oriented so that
+    ``n·(c_a − c_b) >= 0``."""
     diff = cells.centers[a] - cells.centers[b]
     if planar:
         diff = diff.copy()
@@ -163,11 +165,11 @@ def _fallback_normals(cells: Cells, a: np.ndarray, b: np.ndarray, planar: bool) 
     else:
         cross = np.cross(cells.axes[a], cells.axes[b])
     scale = np.maximum(cells.lengths[a] + cells.radii[a] + cells.lengths[b] + cells.radii[b], 1e-300)
-    out = np.tile([1.0, 0.0, 0.0], (a.size, 1))
-    # Assigned in reverse priority, so â × b̂ wins over the centre difference, which wins over x̂.
-    for candidate in (diff, cross):
+    out = perpendicular_basis(cells.axes[a])[0]
+    # Assigned in reverse priority, so â × b̂ wins over the centre difference, which wins over e₁.
+    for candidate, tiny in ((diff, 1e-12 * scale), (cross, 1e-12)):
         norm = np.linalg.norm(candidate, axis=1)
-        ok = norm > 1e-12 * (1.0 if candidate is cross else scale)
+        ok = norm > tiny
         out[ok] = candidate[ok] / norm[ok, None]
     flip = np.einsum("ij,ij->i", out, diff) < 0
     out[flip] *= -1.0

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .cells import Cells
+from .cells import Cells, perpendicular_basis
 from .contacts import Contacts
 from .errors import InvalidArgumentError
 
@@ -35,18 +35,6 @@ from .errors import InvalidArgumentError
 SLOTS = ("tx", "ty", "tz", "spin", "roll1", "roll2", "growth")
 #: Axes and normals with |z| below this count as lying in the xy-plane.
 PLANAR_TOLERANCE = 1e-12
-
-
-def perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit vectors e₁, e₂ with (â, e₁, e₂) right-handed orthonormal. For â in the xy-plane,
-    e₂ = −ẑ, so a planar scene keeps only e₂."""
-    ref = np.zeros_like(axes)
-    near_z = np.abs(axes[:, 2]) > 0.9
-    ref[~near_z, 2] = 1.0
-    ref[near_z, 0] = 1.0
-    e1 = np.cross(axes, ref)
-    e1 /= np.linalg.norm(e1, axis=1)[:, None]
-    return e1, np.cross(axes, e1)
 
 
 def slot_basis(cells: Cells, index: np.ndarray) -> np.ndarray:
@@ -199,7 +187,7 @@ def build_system(
         rod = cells.lengths[involved] > 0
         used[:, 4] &= rod
         used[:, 5] &= rod
-        used[:, 6] = np.isfinite(cells.growth_inertia[involved])
+        used[:, 6] = cells.inverse_growth_inertia[involved] > 0
         if planar:
             used[:, 2] = False  # tz
             used[:, 4] = False  # roll1 lies in the plane; roll2 = -z is kept

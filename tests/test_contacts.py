@@ -1,0 +1,138 @@
+"""Contact detection: broad phase against brute force, and each degenerate geometry of model.md."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+import qpcontact as qc
+from qpcontact.contacts import candidate_pairs, colliding, narrow_phase
+from qpcontact.errors import InvalidArgumentError
+
+from conftest import random_scene
+
+
+def rods(centres, axes, lengths, radii=0.5, **kw):
+    return qc.Cells(np.asarray(centres, float), np.asarray(axes, float), lengths, radii, normalize_axes=True, **kw)
+
+
+def keyed(contacts):
+    return {(int(a), int(b), round(float(d), 9)) for a, b, d in zip(contacts.cell_a, contacts.cell_b, contacts.separation)}
+
+
+@pytest.mark.parametrize("seed", range(5))
+@pytest.mark.parametrize("margin", [0.0, 0.3])
+def test_broad_phase_finds_every_touching_pair(seed, margin):
+    cells = random_scene(seed, n=60, box=6.0)
+    # Mixed lengths: a few long rods must still be found against everything they touch.
+    cells = cells.replace(lengths=np.where(np.arange(60) % 17 == 0, 8.0, cells.lengths))
+    all_pairs = np.array(list(itertools.combinations(range(cells.n), 2)))
+    brute = narrow_phase(cells, all_pairs, margin)
+    fast = qc.find_contacts(cells, margin)
+    assert len(brute) > 30
+    assert keyed(fast) == keyed(brute)
+
+
+def test_contact_geometry_of_two_crossed_rods():
+    # a above b, axes x and z: closest points on the y axis, overlap 0.1.
+    cells = rods([[0, 0.9, 0], [0, 0, 0]], [[1, 0, 0], [0, 0, 1]], [2.0, 2.0])
+    c = qc.find_contacts(cells)
+    assert len(c) == 1
+    assert np.allclose(c.normal[0], [0, 1, 0])
+    assert c.separation[0] == pytest.approx(-0.1)
+    assert np.allclose(c.offset_a[0], [0, -0.5, 0]) and np.allclose(c.offset_b[0], [0, 0.5, 0])
+
+
+def test_parallel_rods_lying_along_each_other_get_two_contacts_at_the_overlap_ends():
+    cells = rods([[0, 0.9, 0], [1.0, 0, 0]], [[1, 0, 0], [1, 0, 0]], [4.0, 4.0])
+    c = qc.find_contacts(cells)
+    assert len(c) == 2
+    axial = np.sort(c.offset_a[:, 0])
+    assert np.allclose(axial, [-1.0, 2.0])  # a spans [-2, 2], b spans [-1, 3]: overlap [-1, 2]
+    assert np.allclose(c.normal, [0, 1, 0]) and np.allclose(c.separation, -0.1)
+
+
+@pytest.mark.parametrize("angle", [0.0, 1e-12, 1e-8, 1e-5])
+def test_nearly_parallel_rods_behave_like_parallel_ones(angle):
+    axis_b = [np.cos(angle), np.sin(angle), 0.0]
+    cells = rods([[0, 0.9, 0], [0, 0, 0]], [[1, 0, 0], axis_b], [4.0, 4.0])
+    c = qc.find_contacts(cells)
+    assert len(c) == 2
+    assert np.allclose(np.sort(c.offset_a[:, 0]), [-2.0, 2.0], atol=1e-4)
+    assert np.allclose(c.normal[:, :2], [[0, 1], [0, 1]], atol=1e-4)
+
+
+def test_parallel_rods_end_to_end_get_one_contact_along_the_axis():
+    cells = rods([[0, 0, 0], [2.9, 0, 0]], [[1, 0, 0], [1, 0, 0]], [2.0, 2.0])
+    c = qc.find_contacts(cells)
+    assert len(c) == 1
+    assert np.allclose(c.normal[0], [-1, 0, 0])  # from b to a
+    assert c.separation[0] == pytest.approx(-0.1)
+    assert c.stretch_a[0] == pytest.approx(0.5) and c.stretch_b[0] == pytest.approx(-0.5)
+
+
+def test_crossing_axes_fall_back_to_the_cross_product():
+    cells = rods([[0, 0, 0], [0, 0, 0]], [[1, 0, 0], [0, 1, 0]], [2.0, 2.0])
+    c = qc.find_contacts(cells)
+    assert len(c) == 1
+    assert np.allclose(np.abs(c.normal[0]), [0, 0, 1])
+    assert c.separation[0] == pytest.approx(-1.0)
+    assert np.all(np.isfinite(c.offset_a))
+
+
+def test_crossing_axes_in_a_planar_scene_keep_the_normal_in_the_plane():
+    cells = rods([[0.1, 0.2, 0], [0, 0, 0]], [[1, 0, 0], [0, 1, 0]], [2.0, 2.0])
+    c = qc.find_contacts(cells, planar=True)
+    assert len(c) >= 1 and np.all(c.normal[:, 2] == 0)
+
+
+def test_coincident_rods_get_a_normal_perpendicular_to_the_axis():
+    cells = rods([[1, 1, 1], [1, 1, 1]], [[0, 0, 1], [0, 0, 1]], [2.0, 2.0])
+    c = qc.find_contacts(cells)
+    assert len(c) == 2  # parallel: both ends of the overlap
+    assert np.allclose(c.normal @ [0, 0, 1], 0.0)
+    assert np.allclose(np.linalg.norm(c.normal, axis=1), 1.0)
+    again = qc.find_contacts(cells)
+    assert np.array_equal(again.normal, c.normal)  # deterministic
+
+
+def test_coincident_spheres_and_sphere_rod_contacts():
+    spheres = rods([[0, 0, 0], [0, 0, 0], [0.8, 0, 0]], [[1, 0, 0]] * 3, [0.0, 0.0, 0.0])
+    c = qc.find_contacts(spheres)
+    assert len(c) == 3 and np.all(np.isfinite(c.normal))
+    pair = (c.cell_a == 0) & (c.cell_b == 2)
+    assert np.allclose(c.normal[pair], [-1, 0, 0]) and c.separation[pair] == pytest.approx(-0.2)
+    mixed = rods([[0, 0.9, 0], [0, 0, 0]], [[1, 0, 0], [1, 0, 0]], [0.0, 3.0])
+    m = qc.find_contacts(mixed)
+    assert len(m) == 1 and np.allclose(m.normal[0], [0, 1, 0])
+
+
+def test_sphere_growth_lever_points_towards_the_contact():
+    # A growing sphere of zero length touched at its +axis side rides with the +tip (½ l̇).
+    cells = rods([[0, 0, 0], [0.9, 0, 0]], [[1, 0, 0], [1, 0, 0]], [0.0, 0.0])
+    c = qc.find_contacts(cells)
+    assert c.stretch_a[0] == pytest.approx(0.5) and c.stretch_b[0] == pytest.approx(-0.5)
+
+
+def test_margin_admits_near_contacts_and_pairs_of_fixed_cells_are_skipped():
+    cells = rods([[0, 1.05, 0], [0, 0, 0]], [[1, 0, 0], [0, 0, 1]], [2.0, 2.0])
+    assert len(qc.find_contacts(cells)) == 0
+    assert len(qc.find_contacts(cells, margin=0.1)) == 1
+    fixed = cells.replace(centers=[[0, 0.9, 0], [0, 0, 0]], masses=np.inf)
+    assert len(candidate_pairs(fixed)) == 0
+    with pytest.raises(InvalidArgumentError, match="margin"):
+        qc.find_contacts(cells, margin=-1.0)
+
+
+def test_colliding_keeps_approaching_pairs_and_position_correction():
+    cells = rods([[0, 0.9, 0], [0, 0, 0], [5, 0.9, 0], [5, 0, 0]], [[1, 0, 0], [0, 0, 1]] * 2, 2.0,
+                 momenta=[[0, -1, 0], [0, 0, 0], [0, 0.01, 0], [0, 0, 0]])
+    contacts = qc.find_contacts(cells)
+    assert len(contacts) == 2
+    active, b = colliding(contacts)
+    assert len(active) == 1 and active.cell_a[0] == 0 and b[0] == pytest.approx(1.0)
+    # The separating pair (0.01 per unit time) does not clear an overlap of 0.1 in dt = 1 with β = 1.
+    active, b = colliding(contacts, position_correction=1.0, dt=1.0)
+    assert len(active) == 2 and np.allclose(np.sort(b), [0.09, 1.1])
+    with pytest.raises(InvalidArgumentError, match="dt"):
+        colliding(contacts, position_correction=0.5)

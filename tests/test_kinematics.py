@@ -1,0 +1,120 @@
+"""The row nᵀM_r against finite differences of a moving, growing body point (model.md), and the
+seed's errata shown to be errors."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+import qpcontact as qc
+from qpcontact.contacts import Contacts
+from qpcontact.system import build_system
+
+
+def random_cell(rng):
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    return qc.Cells(
+        rng.normal(size=(1, 3)), axis[None], rng.uniform(0.5, 3.0, 1), rng.uniform(0.2, 0.8, 1),
+        masses=rng.uniform(0.5, 3.0, 1), growth_inertia=rng.uniform(0.5, 3.0, 1),
+        momenta=rng.normal(size=(1, 3)), angular_momenta=rng.normal(size=(1, 3)), growth_momenta=rng.normal(size=1),
+    )
+
+
+def material_point(cell, sigma, e, h):
+    """Position at time h of the body point at axial fraction ``sigma`` (−½..½) and radial unit
+    offset ``e`` (⊥ axis, or any direction at a tip), moving with the cell's velocities."""
+    v, w, ldot = cell.velocities[0], cell.angular_velocities[0], cell.growth_rates[0]
+    rot = Rotation.from_rotvec(w * h)
+    c = cell.centers[0] + v * h
+    a = rot.apply(cell.axes[0])
+    length = cell.lengths[0] + ldot * h
+    return c + sigma * length * a + cell.radii[0] * rot.apply(e)
+
+
+def fd_velocity(cell, sigma, e, h=1e-6):
+    return (material_point(cell, sigma, e, h) - material_point(cell, sigma, e, -h)) / (2 * h)
+
+
+def sample_point(rng, cell, on_cap):
+    a = cell.axes[0]
+    if on_cap:
+        sigma = rng.choice([-0.5, 0.5])
+        e = rng.normal(size=3)
+        e -= min(0.0, np.sign(sigma) * (e @ a)) * a * 2 * np.sign(sigma)  # outward hemisphere
+        e /= np.linalg.norm(e)
+    else:
+        sigma = rng.uniform(-0.5, 0.5)
+        e = np.cross(a, rng.normal(size=3))
+        e /= np.linalg.norm(e)
+    return sigma, e
+
+
+def system_row(cell, sigma, e, n):
+    """nᵀM_r p computed by qpcontact (a contact of the cell with a static body, normal n)."""
+    offset = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
+    contacts = Contacts(np.array([0]), np.array([-1]), n[None], offset[None], np.zeros((1, 3)),
+                        np.array([sigma]), np.zeros(1), np.array([-0.1]), np.array([-1.0]))
+    system = build_system(cell, contacts, np.array([1.0]), reduce=False)
+    y = system.from_impulses(cell.generalized_momenta())
+    return float((system.matrix @ y)[0] * system.velocity_scale)
+
+
+@pytest.mark.parametrize("seed", range(20))
+@pytest.mark.parametrize("on_cap", [False, True])
+def test_row_matches_finite_differences(seed, on_cap):
+    rng = np.random.default_rng(seed)
+    cell = random_cell(rng)
+    sigma, e = sample_point(rng, cell, on_cap)
+    n = rng.normal(size=3)
+    n /= np.linalg.norm(n)
+    expected = n @ fd_velocity(cell, sigma, e)
+    assert system_row(cell, sigma, e, n) == pytest.approx(expected, rel=1e-7, abs=1e-8)
+
+
+def seed_point_velocity(cell, r, *, sign=+1.0, growth_factor=0.5):
+    """The seed's point velocity: ``v + sign·[r]× I⁻¹ L + growth_factor (â·r)/l · g/G â``."""
+    a = cell.axes[0]
+    w = cell.angular_velocities[0]
+    return cell.velocities[0] + sign * np.cross(r, w) + growth_factor * (a @ r) / cell.lengths[0] * cell.growth_rates[0] * a
+
+
+def test_seed_sign_of_the_angular_block_is_wrong():
+    """Erratum 1: the seed's M_r has +[r]×I⁻¹; only −[r]×I⁻¹ (= ω × r) matches the motion."""
+    rng = np.random.default_rng(7)
+    cell = random_cell(rng).replace(growth_momenta=[0.0])
+    sigma, e = sample_point(rng, cell, False)
+    r = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
+    fd = fd_velocity(cell, sigma, e)
+    assert np.allclose(seed_point_velocity(cell, r, sign=-1.0), fd, atol=1e-7)
+    assert not np.allclose(seed_point_velocity(cell, r, sign=+1.0), fd, atol=1e-3)
+
+
+def test_seed_growth_factor_one_half_is_wrong_for_full_length():
+    """Erratum 2: with l the full length, a body point moves by (s/l) l̇ â, not ½ (s/l) l̇ â."""
+    rng = np.random.default_rng(3)
+    cell = random_cell(rng).replace(momenta=np.zeros((1, 3)), angular_momenta=np.zeros((1, 3)))
+    e = np.cross(cell.axes[0], [0.0, 0.0, 1.0])
+    e /= np.linalg.norm(e)
+    sigma = 0.4
+    r = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
+    fd = fd_velocity(cell, sigma, e)
+    assert np.allclose(seed_point_velocity(cell, r, sign=-1.0, growth_factor=1.0), fd, atol=1e-7)
+    assert not np.allclose(seed_point_velocity(cell, r, sign=-1.0, growth_factor=0.5), fd, atol=1e-3)
+
+
+def test_seed_closed_form_normal_equation_block_is_not_MtM():
+    """Erratum 5: each contact adds the rank-one (nᵀM_s)ᵀ(nᵀM_r) to MᵀM; the seed's printed
+    diagonal 1/(M₁M₂) for the linear block ignores the normal."""
+    rng = np.random.default_rng(11)
+    cell = random_cell(rng)
+    n = np.array([0.6, 0.8, 0.0])
+    contacts = Contacts(np.array([0]), np.array([-1]), n[None], np.array([[0.1, 0.2, 0.3]]), np.zeros((1, 3)),
+                        np.array([0.1]), np.zeros(1), np.array([-0.1]), np.array([-1.0]))
+    system = build_system(cell, contacts, np.array([1.0]), reduce=False)
+    # Unscale to physical M in the slot basis (translation slots are world x, y, z).
+    m_row = system.matrix.toarray()[0] * system.operator_scale * np.sqrt(system.column_inverse_mass)
+    mtm = np.outer(m_row, m_row)
+    m = cell.masses[0]
+    assert mtm[0, 0] == pytest.approx(n[0] ** 2 / m**2)
+    assert mtm[2, 2] == 0.0  # n_z = 0: no z-row in MᵀM at all
+    assert mtm[0, 0] != pytest.approx(1.0 / m**2)  # the seed's 1/(M₁M₂) with M₁ = M₂ = m
