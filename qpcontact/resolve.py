@@ -158,6 +158,7 @@ def resolve(
     contacts: Contacts | None = None,
     reduce: bool = True,
     planar: bool | None = None,
+    scale: bool = True,
     time_limit: float | None = None,
     regularization: float = 0.0,
     solver_settings: dict[str, Any] | None = None,
@@ -182,6 +183,8 @@ def resolve(
             None.
         reduce: leave out unknowns the scene does not need (default True).
         planar: force (True) or forbid (False) the planar reduction; None detects it.
+        scale: nondimensionalize the system (default; see :mod:`qpcontact.system`). ``False``
+            hands the solvers the system in the caller's units (for measurements only).
         time_limit: seconds the solver may take, where the backend supports it.
         regularization: ε of the least_squares formulation (dimensionless; default 0 = the exact
             minimum-W-norm selection).
@@ -209,7 +212,7 @@ def resolve(
                       DEFAULT_FORM[formulation] if form == "auto" else form, True, "no_contact", 0,
                       {"detect": t_detect - t_start, "assemble": 0.0, "setup": 0.0, "solve": 0.0, "check": 0.0,
                        "total": time.perf_counter() - t_start}, {"penetration": 0.0}, 0, bool(planar))
-    system = build_system(cells, active, b, reduce=reduce, planar=planar)
+    system = build_system(cells, active, b, reduce=reduce, planar=planar, scale=scale)
     t_assemble = time.perf_counter()
     y, lam, info = solve_system(system, cells, solver=solver, formulation=formulation, form=form, tolerance=tolerance,
                                 time_limit=time_limit, regularization=regularization, solver_settings=solver_settings,

@@ -148,7 +148,8 @@ def contact_jacobian(contacts: Contacts, cells: Cells, side: str) -> np.ndarray:
 
 
 def build_system(
-    cells: Cells, contacts: Contacts, b: np.ndarray, *, reduce: bool = True, planar: bool | None = None
+    cells: Cells, contacts: Contacts, b: np.ndarray, *, reduce: bool = True, planar: bool | None = None,
+    scale: bool = True,
 ) -> ContactSystem:
     """Assemble the scaled system for the colliding ``contacts`` with right-hand side ``b``.
 
@@ -160,6 +161,8 @@ def build_system(
             seven slots of every cell (for tests: the answer must not change).
         planar: use the planar reduction; ``None`` detects it (:func:`is_planar`). ``True`` on a
             scene that is not planar raises.
+        scale: divide by ``σ_b`` and ``σ_B`` (default). ``False`` sets both to 1 (the matrix is
+            then ``J W^{1/2}`` in the caller's units), only to measure the effect of scaling.
     """
     k = len(contacts)
     if b.shape != (k,):
@@ -215,8 +218,9 @@ def build_system(
         raise InvalidArgumentError(
             f"contact {bad} (cells {contacts.cell_a[bad]}, {contacts.cell_b[bad]}) has no movable degree of freedom"
         )
-    operator_scale = float(np.sqrt(diag.mean()))
-    velocity_scale = float(np.max(np.abs(b)))
+    # scale=False (σ_b = σ_B = 1) exists to measure what the scaling buys (docs/stability.md).
+    operator_scale = float(np.sqrt(diag.mean())) if scale else 1.0
+    velocity_scale = float(np.max(np.abs(b))) if scale else 1.0
     col_cell, col_slot = np.nonzero(column_of >= 0)
     order = np.argsort(column_of[col_cell, col_slot])
     col_cell, col_slot = col_cell[order], col_slot[order]
