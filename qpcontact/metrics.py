@@ -27,6 +27,16 @@ def complementarity_residual(system: ContactSystem, y: np.ndarray, lam: np.ndarr
     return float(np.max(np.abs(np.minimum(lam, slack)), initial=0.0))
 
 
+def duality_gap(system: ContactSystem, y: np.ndarray, lam: np.ndarray) -> float:
+    """Relative duality gap of the complementarity QP, ``|λ̃ᵀ(B̃ỹ − b̃)| / ‖ỹ‖²`` (with
+    ``ỹ = B̃ᵀλ̃`` the primal objective minus the dual one, over twice the objective). Unlike the
+    complementarity residual, which an interior-point method drives down only like the square root
+    of its tolerance, this falls with the tolerance for every converged backend."""
+    norm2 = float(y @ y)
+    gap = abs(float(lam @ (system.matrix @ y - system.rhs)))
+    return gap / norm2 if norm2 > 0 else gap
+
+
 def multiplier_consistency(system: ContactSystem, y: np.ndarray, lam: np.ndarray) -> float:
     """``‖ỹ − B̃ᵀλ̃‖ / ‖ỹ‖``: how far the impulses are from equal and opposite contact impulses."""
     norm = float(np.linalg.norm(y))
