@@ -159,7 +159,8 @@ def _status(solution: qpsolvers.Solution) -> tuple[str, int | None]:
         status = extras.get("status", status)
     if status is None:
         status = "solved" if solution.found else "not solved"
-    return str(status), None if iterations is None else int(iterations)
+    # Enum reprs such as "Status.PIQP_SOLVED" read better without the class name.
+    return str(status).rsplit(".", 1)[-1], None if iterations is None else int(iterations)
 
 
 def solve_qp_system(
