@@ -1,0 +1,558 @@
+"""``qpcontact compare``: every solver's error against its run time, on colony scenes.
+
+For each scene (:mod:`qpcontact.scenes`), the system is assembled once (:func:`build_system`);
+then each *method* — a solver with a formulation and a form — solves it at each tolerance, and
+the run is timed (median of repeats, setup and solve apart) and measured against a high-accuracy
+reference of the same formulation (model.md, "Measuring error"). Methods:
+
+- ``linear``: the plain minimum-W-norm solve (formulation ``linear``: ``Mx = b``, may pull);
+- ``cg``, ``cg_euclidean``: CG on the normal equations from zero (CellModeller; in the
+  kinetic-energy metric, and in raw impulses as CellModeller runs it), also formulation ``linear``;
+- ``bbpgd``: projected gradient with Barzilai–Borwein steps on the contact-space complementarity
+  problem;
+- every installed qpsolvers backend × formulation (``complementarity``, ``least_squares``) × form
+  (``primal``, ``contact``); dense-only backends only on scenes with few unknowns.
+
+Every run becomes a row of the CSV, failures and time-outs included. A run *succeeds* when the
+solver says it converged (and passes the package's own acceptance checks) and its answer is
+within ``ACCURACY_FACTOR·tolerance`` of the reference; a run that says it converged but is not
+that close is counted as *reported success, inaccurate*. Each run is made in a forked child
+process with a hard time-out, so a backend without a time limit of its own (or one that crashes)
+cannot stop the comparison.
+
+Outputs in ``--out``: ``solvers.csv`` (every run), ``solvers.png`` (error against time, log–log,
+one panel per scene family and formulation), ``solvers.md`` (summary table).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import multiprocessing
+import platform
+import time
+import traceback
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import qpsolvers
+
+from . import metrics
+from .baselines import BASELINES, solve_baseline
+from .cells import Cells
+from .contacts import colliding, find_contacts
+from .linear import solve_min_norm
+from .qp import FORMS, FORMULATIONS
+from .resolve import ACCEPT_FACTOR, solve_system
+from .scenes import make_scene
+from .system import ContactSystem, build_system
+from .validation import ACTIVE_THRESHOLD, reference_solution
+
+#: A run is accurate when its distance to the reference is at most this many times the tolerance
+#: (with the floor ``ACCURACY_FLOOR``: the references themselves are good to about 1e-9).
+ACCURACY_FACTOR = 100.0
+ACCURACY_FLOOR = 1e-7
+#: Shift of the shifted geometric mean of times [s] (qpbenchmark's 10 ms).
+SGM_SHIFT = 0.01
+#: Dense-only backends run only on scenes with at most this many unknowns.
+DENSE_MAX_UNKNOWNS = 2000
+#: Stop repeating a run once its repeats took this long [s] (at least one run is always made).
+REPEAT_BUDGET = 1.0
+
+
+@dataclass(frozen=True)
+class SceneCase:
+    """One scene of the comparison.
+
+    Attributes:
+        name: label (also the ``--scenes`` name).
+        family: panel of the plot (``hand-made``, ``colony_2d``, ``colony_3d``).
+        generator: key of :data:`qpcontact.scenes.SCENES`.
+        n_cells: cell count handed to the generator (None: its default).
+        position_correction, dt: ``b = −u + β·max(0, −d)/dt`` (β = 0: plain approach speeds,
+            for which ``Mx = b`` is always consistent, since stopping every cell solves it).
+    """
+
+    name: str
+    family: str
+    generator: str
+    n_cells: int | None = None
+    position_correction: float = 0.0
+    dt: float | None = None
+
+
+def _colony(dimension: int, n: int) -> SceneCase:
+    return SceneCase(f"colony_{dimension}d_{n}", f"colony_{dimension}d", f"colony_{dimension}d", n)
+
+
+HAND_MADE = [
+    SceneCase("two_rods", "hand-made", "two_rods"),
+    SceneCase("rod_chain", "hand-made", "rod_chain", 20),
+    SceneCase("rod_across_many", "hand-made", "rod_across_many", 12),
+    SceneCase("jammed_packing", "hand-made", "jammed_packing", 61),
+    # With position correction the jammed packing is over-determined: Mx = b has no solution.
+    SceneCase("jammed_packing_pc", "hand-made", "jammed_packing", 61, position_correction=0.5, dt=1.0),
+]
+DEFAULT_SCENES = HAND_MADE + [_colony(d, n) for d in (2, 3) for n in (100, 1000, 10_000)]
+QUICK_SCENES = [HAND_MADE[0], HAND_MADE[3], HAND_MADE[4], _colony(2, 100), _colony(3, 100)]
+ALL_SCENES = {case.name: case for case in DEFAULT_SCENES + [_colony(d, 100_000) for d in (2, 3)]}
+
+DEFAULT_TOLERANCES = (1e-3, 1e-6, 1e-9)
+
+
+@dataclass(frozen=True)
+class Method:
+    """A solver with the formulation and form it solves."""
+
+    solver: str
+    formulation: str  # "linear" (Mx = b), "complementarity" or "least_squares"
+    form: str  # "primal", "contact" or "normal_equations" (CG)
+
+    @property
+    def label(self) -> str:
+        return f"{self.solver}/{self.formulation}/{self.form}"
+
+
+def all_methods(solvers: list[str] | None = None) -> list[Method]:
+    """Methods for these solver names (default: linear, the baselines and every installed
+    qpsolvers backend)."""
+    names = solvers or ["linear", *BASELINES, *sorted(qpsolvers.available_solvers)]
+    out = []
+    for name in names:
+        if name == "linear":
+            out.append(Method("linear", "linear", "contact"))
+        elif name in ("cg", "cg_euclidean"):
+            out.append(Method(name, "linear", "normal_equations"))
+        elif name == "bbpgd":
+            out.append(Method(name, "complementarity", "contact"))
+        elif name in qpsolvers.available_solvers:
+            out += [Method(name, f, form) for f in FORMULATIONS for form in FORMS]
+        else:
+            raise SystemExit(f"qpcontact compare: unknown or uninstalled solver {name!r}; "
+                             f"known: linear, {', '.join(BASELINES)}, {', '.join(sorted(qpsolvers.available_solvers))}")
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# Scenes and references
+# ------------------------------------------------------------------------------------------
+@dataclass
+class Prepared:
+    """An assembled scene with its references."""
+
+    case: SceneCase
+    cells: Cells
+    system: ContactSystem
+    references: dict[str, np.ndarray]  # formulation -> ỹ* ("linear", "least_squares", "complementarity")
+    reference_residual: float  # KKT residual of the complementarity reference
+    all_active: bool  # the linear solve pushes at every contact (then every formulation equals it)
+    assemble_seconds: float
+    reference_seconds: float
+
+
+def complementarity_reference(system: ContactSystem) -> tuple[np.ndarray, float]:
+    """``(ỹ*, residual)``: :func:`reference_solution`, then refined by BBPGD to a
+    complementarity residual of 1e-12, started from its own contact impulses; the refinement is
+    kept only if it certifies a smaller residual ``‖min(λ̃, B̃ỹ − b̃)‖∞`` (with ``ỹ = B̃ᵀλ̃``, λ̃ ≥ 0)."""
+    y = reference_solution(system, "complementarity")
+    lam = solve_min_norm(system.matrix.T.tocsr(), y, tol=1e-12, method="lsmr").y
+    residual = max(metrics.complementarity_residual(system, y, lam), float(np.max(-lam, initial=0.0)))
+    refined = solve_baseline_from(system, np.maximum(lam, 0.0))
+    if refined is not None and refined[1] < residual:
+        return refined
+    return y, residual
+
+
+def solve_baseline_from(system: ContactSystem, initial: np.ndarray) -> tuple[np.ndarray, float] | None:
+    from .baselines import bbpgd
+
+    out = bbpgd(system, tol=1e-12, initial=initial, max_iterations=50_000, time_limit=60.0)
+    return (out.y, out.residual) if out.converged else None
+
+
+def prepare(case: SceneCase) -> Prepared:
+    """Generate, assemble and solve the references of one scene."""
+    cells = make_scene(case.generator, case.n_cells)
+    t0 = time.perf_counter()
+    active, b = colliding(find_contacts(cells), position_correction=case.position_correction, dt=case.dt)
+    system = build_system(cells, active, b)
+    t1 = time.perf_counter()
+    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-12)
+    comp, residual = complementarity_reference(system)
+    references = {"linear": lin.y, "least_squares": reference_solution(system, "least_squares"), "complementarity": comp}
+    lam_scale = max(float(np.max(np.abs(lin.lam), initial=0.0)), 1e-300)
+    all_active = bool(lin.consistent and np.all(lin.lam > ACTIVE_THRESHOLD * lam_scale))
+    return Prepared(case, cells, system, references, residual, all_active, t1 - t0, time.perf_counter() - t1)
+
+
+# ------------------------------------------------------------------------------------------
+# One run
+# ------------------------------------------------------------------------------------------
+def solve_once(prepared: Prepared, method: Method, tolerance: float, time_limit: float) -> dict[str, Any]:
+    """Solve once; returns y, lam, converged, status, iterations, setup, solve, message."""
+    system = prepared.system
+    if method.solver in BASELINES:
+        out = solve_baseline(system, method.solver, tolerance=tolerance, time_limit=time_limit)
+        return {"y": out.y, "lam": out.lam, "converged": out.converged, "status": out.status,
+                "iterations": out.iterations, "setup": 0.0, "solve": out.seconds,
+                "message": "" if out.converged else f"{method.solver} stopped: {out.status} (residual {out.residual:.3g})"}
+    formulation = "complementarity" if method.formulation == "linear" else method.formulation
+    y, lam, info = solve_system(system, prepared.cells, solver=method.solver, formulation=formulation,
+                                form=method.form, tolerance=tolerance, time_limit=time_limit)
+    return {"y": y, "lam": lam, "converged": bool(info["converged"]), "status": info["status"],
+            "iterations": info["iterations"], "setup": info["setup"], "solve": info["solve"], "message": info["message"]}
+
+
+def repeated(prepared: Prepared, method: Method, tolerance: float, time_limit: float, repeats: int) -> dict[str, Any]:
+    """Up to ``repeats`` solves (fewer once they took ``REPEAT_BUDGET``); medians of the times."""
+    setups, solves, out = [], [], {}
+    while len(solves) < repeats and (not solves or sum(setups) + sum(solves) < REPEAT_BUDGET):
+        out = solve_once(prepared, method, tolerance, time_limit)
+        setups.append(out["setup"])
+        solves.append(out["solve"])
+    out.update(setup=float(np.median(setups)), solve=float(np.median(solves)), repeats=len(solves))
+    return out
+
+
+def _child(conn, fn: Callable[[], dict[str, Any]]) -> None:
+    try:
+        conn.send(("ok", fn()))
+    except BaseException as exc:  # report everything to the parent, which records it as a row
+        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"))
+    finally:
+        conn.close()
+
+
+def guarded(fn: Callable[[], dict[str, Any]], timeout: float) -> tuple[str, Any]:
+    """Run ``fn`` in a forked child with a hard ``timeout`` [s]: ``("ok", result)``,
+    ``("error", text)``, ``("timeout", None)`` or ``("crashed", exit code)``."""
+    context = multiprocessing.get_context("fork")
+    parent, child = context.Pipe(duplex=False)
+    process = context.Process(target=_child, args=(child, fn), daemon=True)
+    process.start()
+    child.close()
+    try:
+        if parent.poll(timeout):
+            try:
+                return parent.recv()
+            except EOFError:
+                pass
+            process.join(5)
+            return "crashed", process.exitcode
+        return "timeout", None
+    finally:
+        if process.is_alive():
+            process.kill()
+        process.join()
+        parent.close()
+
+
+def measure(prepared: Prepared, method: Method, tolerance: float, y: np.ndarray | None, lam: np.ndarray | None) -> dict[str, float]:
+    """The error measures of model.md for one answer (NaN where not defined)."""
+    nan = float("nan")
+    keys = ("penetration", "complementarity", "duality_gap", "distance", "objective_gap", "distance_complementarity",
+            "distance_linear", "momentum_change", "angular_momentum_change", "energy_change_relative")
+    if y is None or not np.all(np.isfinite(y)):
+        return dict.fromkeys(keys, nan)
+    system = prepared.system
+    reference = prepared.references[method.formulation]
+    objective = "least_squares" if method.formulation == "linear" else method.formulation
+    impulses = system.to_impulses(y)
+    physics = metrics.physics(prepared.cells, system, impulses, None if lam is None else system.to_contact_impulses(lam))
+    comp = method.formulation == "complementarity" and lam is not None
+    return {
+        "penetration": metrics.penetration(system, y),
+        "complementarity": metrics.complementarity_residual(system, y, lam) if comp else nan,
+        "duality_gap": metrics.duality_gap(system, y, lam) if comp else nan,
+        "distance": metrics.distance(y, reference),
+        "objective_gap": metrics.objective_gap(system, objective, y, reference),
+        "distance_complementarity": metrics.distance(y, prepared.references["complementarity"]),
+        "distance_linear": metrics.distance(y, prepared.references["linear"]),
+        "momentum_change": physics["momentum_change"],
+        "angular_momentum_change": physics["angular_momentum_change"],
+        "energy_change_relative": physics["energy_change_relative"],
+    }
+
+
+COLUMNS = (
+    "scene", "family", "n_cells", "contacts", "unknowns", "planar", "all_active", "method", "solver", "formulation", "form",
+    "tolerance", "repeats", "setup_s", "solve_s", "total_s", "outcome", "status", "converged", "accurate", "success",
+    "iterations", "penetration", "complementarity", "duality_gap", "distance", "objective_gap", "distance_complementarity",
+    "distance_linear", "momentum_change", "angular_momentum_change", "energy_change_relative", "message",
+)
+
+
+def run_one(prepared: Prepared, method: Method, tolerance: float, *, time_limit: float, repeats: int) -> dict[str, Any]:
+    """One row of the CSV (never raises for a solver failure)."""
+    system = prepared.system
+    k, n = system.shape
+    row: dict[str, Any] = {
+        "scene": prepared.case.name, "family": prepared.case.family, "n_cells": prepared.cells.n, "contacts": k,
+        "unknowns": n, "planar": system.planar, "all_active": prepared.all_active, "method": method.label,
+        "solver": method.solver, "formulation": method.formulation, "form": method.form, "tolerance": tolerance,
+    }
+    # Repeats stop once they took REPEAT_BUDGET, so a child needs at most that plus one solve.
+    hard_timeout = 1.5 * time_limit + REPEAT_BUDGET + 5.0
+    start = time.perf_counter()
+    outcome, payload = guarded(lambda: repeated(prepared, method, tolerance, time_limit, repeats), hard_timeout)
+    y = lam = None
+    if outcome == "ok":
+        y, lam = payload["y"], payload["lam"]
+        row.update(repeats=payload["repeats"], setup_s=payload["setup"], solve_s=payload["solve"],
+                   total_s=payload["setup"] + payload["solve"], status=payload["status"], converged=payload["converged"],
+                   iterations=payload["iterations"], message=payload["message"])
+        if payload["status"] in ("time_limit", "TIME_LIMIT", "MaxTime", "time limit reached") or (
+                not payload["converged"] and row["total_s"] >= 0.95 * time_limit):
+            outcome = "time_limit"
+        elif not payload["converged"]:
+            outcome = "not_converged"
+    else:
+        elapsed = time.perf_counter() - start
+        row.update(repeats=0, setup_s=math.nan, solve_s=math.nan, total_s=elapsed if outcome == "timeout" else math.nan,
+                   status=outcome, converged=False, iterations=None,
+                   message=(f"killed after {hard_timeout:.0f} s" if outcome == "timeout" else str(payload))[:300])
+    errors = measure(prepared, method, tolerance, y, lam)
+    accurate = bool(errors["distance"] <= max(ACCURACY_FACTOR * tolerance, ACCURACY_FLOOR))
+    row.update(errors, accurate=accurate, success=bool(row["converged"] and accurate))
+    if outcome == "ok":
+        outcome = "success" if row["success"] else "converged_inaccurate"
+    row["outcome"] = outcome
+    return row
+
+
+# ------------------------------------------------------------------------------------------
+# Summary, plot
+# ------------------------------------------------------------------------------------------
+def shifted_geometric_mean(times: np.ndarray, shift: float = SGM_SHIFT) -> float:
+    """``exp(mean(log(t + shift))) − shift`` (qpbenchmark)."""
+    times = np.asarray(times, dtype=float)
+    return float(np.exp(np.mean(np.log(times + shift))) - shift) if times.size else math.nan
+
+
+def summarize(rows: list[dict[str, Any]], time_limit: float) -> list[dict[str, Any]]:
+    """Per method: runs, success rate, reported-but-inaccurate runs, median time and error,
+    shifted geometric mean of the time (an unsuccessful run counts as ``time_limit``, as in
+    qpbenchmark) and its ratio to the best method's."""
+    table = []
+    for label in dict.fromkeys(r["method"] for r in rows):
+        mine = [r for r in rows if r["method"] == label]
+        success = np.array([r["success"] for r in mine])
+        times = np.array([r["total_s"] if r["success"] else time_limit for r in mine])
+        measured = np.array([r["total_s"] for r in mine if np.isfinite(r["total_s"])])
+        errors = np.array([r["distance"] for r in mine if np.isfinite(r["distance"])])
+        table.append({
+            "method": label, "runs": len(mine), "success_rate": float(success.mean()),
+            "inaccurate": sum(1 for r in mine if r["outcome"] == "converged_inaccurate"),
+            "failed": sum(1 for r in mine if r["outcome"] not in ("success", "converged_inaccurate")),
+            "median_time_s": float(np.median(measured)) if measured.size else math.nan,
+            "median_distance": float(np.median(errors)) if errors.size else math.nan,
+            "sgm_time_s": shifted_geometric_mean(times),
+        })
+    best = min((t["sgm_time_s"] for t in table), default=math.nan)
+    for t in table:
+        t["sgm_ratio"] = t["sgm_time_s"] / best if best > 0 else math.nan
+    table.sort(key=lambda t: t["sgm_time_s"])
+    return table
+
+
+def markdown_table(summary: list[dict[str, Any]]) -> str:
+    head = ("| method (solver/formulation/form) | runs | success | reported success, inaccurate | failed or time-out "
+            "| median time [ms] | median distance | SGM time [ms] | SGM ratio |\n|---|---|---|---|---|---|---|---|---|")
+    lines = [head]
+    for t in summary:
+        lines.append(f"| {t['method']} | {t['runs']} | {100 * t['success_rate']:.0f} % | {t['inaccurate']} | {t['failed']} "
+                     f"| {1e3 * t['median_time_s']:.3g} | {t['median_distance']:.1e} | {1e3 * t['sgm_time_s']:.3g} "
+                     f"| {t['sgm_ratio']:.1f} |")
+    return "\n".join(lines)
+
+
+def scene_table(rows: list[dict[str, Any]], scene: str, tolerance: float) -> str:
+    """Time and error of every method on one scene at one tolerance."""
+    mine = sorted((r for r in rows if r["scene"] == scene and r["tolerance"] == tolerance),
+                  key=lambda r: (not r["success"], r["total_s"] if np.isfinite(r["total_s"]) else math.inf))
+    lines = ["| method | outcome | setup [ms] | solve [ms] | distance | penetration | distance to complementarity |",
+             "|---|---|---|---|---|---|---|"]
+    for r in mine:
+        lines.append(f"| {r['method']} | {r['outcome']} | {1e3 * r['setup_s']:.3g} | {1e3 * r['solve_s']:.3g} "
+                     f"| {r['distance']:.1e} | {r['penetration']:.1e} | {r['distance_complementarity']:.1e} |")
+    return "\n".join(lines)
+
+
+SOLVER_STYLE = {
+    "linear": ("k", "*"), "cg": ("tab:gray", "v"), "cg_euclidean": ("tab:brown", "1"), "bbpgd": ("tab:pink", "P"),
+    "clarabel": ("tab:blue", "o"), "osqp": ("tab:orange", "s"), "piqp": ("tab:green", "D"), "proxqp": ("tab:red", "^"),
+    "highs": ("tab:purple", "x"), "scs": ("tab:olive", "<"),
+}
+
+
+def plot(rows: list[dict[str, Any]], path: Path) -> None:
+    """Distance to the reference against total time (log–log): one panel per scene family
+    (columns) and formulation (rows; the plain linear problem goes with least_squares), one
+    marker per solver, one line per tolerance sweep (a method on one scene), solid for the primal
+    form, dashed for the contact form. Failed runs are not drawn (they are in the CSV)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    families = list(dict.fromkeys(r["family"] for r in rows))
+    panel_rows = [("complementarity", ("complementarity",)), ("least_squares and linear", ("least_squares", "linear"))]
+    fig, axes = plt.subplots(len(panel_rows), len(families), figsize=(5.2 * len(families), 4.4 * len(panel_rows)),
+                             squeeze=False, sharex=True, sharey=True)
+    floor = 1e-13
+    handles = {}
+    for i, (title, formulations) in enumerate(panel_rows):
+        for j, family in enumerate(families):
+            ax = axes[i, j]
+            mine = [r for r in rows if r["family"] == family and r["formulation"] in formulations]
+            for (scene, label) in dict.fromkeys((r["scene"], r["method"]) for r in mine):
+                sweep = sorted((r for r in mine if r["scene"] == scene and r["method"] == label),
+                               key=lambda r: -r["tolerance"])
+                pts = [(r["total_s"], max(r["distance"], floor), r["success"]) for r in sweep
+                       if np.isfinite(r["total_s"]) and np.isfinite(r["distance"]) and r["outcome"] != "time_limit"]
+                if not pts:
+                    continue
+                solver, form = sweep[0]["solver"], sweep[0]["form"]
+                color, marker = SOLVER_STYLE.get(solver, ("tab:cyan", "h"))
+                t, d, ok = map(np.array, zip(*pts))
+                ax.plot(t, d, color=color, lw=0.8, alpha=0.6, ls="--" if form == "contact" else "-")
+                ax.scatter(t[ok], d[ok], color=color, marker=marker, s=22, zorder=3)
+                ax.scatter(t[~ok], d[~ok], facecolors="none", edgecolors=color, marker="o", s=40, zorder=3)
+                handles[solver] = plt.Line2D([], [], color=color, marker=marker, ls="")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.grid(True, which="major", alpha=0.3)
+            ax.set_title(f"{family}: {title}", fontsize=10)
+            if i == len(panel_rows) - 1:
+                ax.set_xlabel("time (setup + solve) [s]")
+            if j == 0:
+                ax.set_ylabel("‖x − x*‖_W / ‖x*‖_W")
+    handles["failed check (hollow)"] = plt.Line2D([], [], color="k", marker="o", markerfacecolor="none", ls="")
+    handles["contact form (dashed)"] = plt.Line2D([], [], color="k", ls="--")
+    fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(7, len(handles)), fontsize=9)
+    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------------
+# Command
+# ------------------------------------------------------------------------------------------
+def _select_scenes(spec: str | None, quick: bool) -> list[SceneCase]:
+    if not spec:
+        return QUICK_SCENES if quick else DEFAULT_SCENES
+    out = []
+    for name in spec.split(","):
+        name = name.strip()
+        matches = [c for c in ALL_SCENES.values() if name in (c.name, c.family, c.generator)]
+        if not matches:
+            raise SystemExit(f"qpcontact compare: unknown scene {name!r}; known: {', '.join(ALL_SCENES)} "
+                             "(or a family: hand-made, colony_2d, colony_3d)")
+        out += [m for m in matches if m not in out]
+    return out
+
+
+def warm_up(methods: list[Method]) -> None:
+    """Solve a two-rod scene once with every method in this process, so that lazy imports and
+    first-call initialization are done before the timed runs are forked off."""
+    prepared = prepare(SceneCase("warm-up", "hand-made", "two_rods"))
+    for method in methods:
+        try:
+            solve_once(prepared, method, 1e-6, 5.0)
+        except Exception:  # a backend that fails here fails again, and is recorded, in the real runs
+            pass
+
+
+def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="qpcontact compare", description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", help="comma-separated scene names or families (default: the default set; "
+                        f"known: {', '.join(ALL_SCENES)})")
+    parser.add_argument("--solvers", help="comma-separated solvers (default: linear, cg, cg_euclidean, bbpgd and "
+                        "every installed qpsolvers backend)")
+    parser.add_argument("--tolerances", default=None, help="comma-separated tolerances (default 1e-3,1e-6,1e-9)")
+    parser.add_argument("--repeats", type=int, default=3, help="repeats per run; the median time is kept (default 3)")
+    parser.add_argument("--time-limit", type=float, default=5.0,
+                        help="seconds per solve, passed to the backends that take one; a run is killed after "
+                             "1.5× this plus a few seconds (default 5)")
+    parser.add_argument("--out", type=Path, default=Path("compare-out"), help="output folder (default ./compare-out)")
+    parser.add_argument("--quick", action="store_true", help="a small set (five small scenes, tolerances 1e-3, 1e-6, one repeat)")
+    args = parser.parse_args(argv)
+    from tqdm import tqdm
+
+    tolerances = [float(t) for t in args.tolerances.split(",")] if args.tolerances else (
+        [1e-3, 1e-6] if args.quick else list(DEFAULT_TOLERANCES))
+    repeats = 1 if args.quick and args.repeats == 3 else max(1, args.repeats)
+    cases = _select_scenes(args.scenes, args.quick)
+    methods = all_methods([s.strip() for s in args.solvers.split(",")] if args.solvers else None)
+    args.out.mkdir(parents=True, exist_ok=True)
+    started = datetime.now(timezone.utc)
+    rows: list[dict[str, Any]] = []
+    scene_lines = []
+    warm_up(methods)
+    with tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True) as bar:
+        for case in cases:
+            bar.set_description(f"{case.name}: references")
+            prepared = prepare(case)
+            k, n = prepared.system.shape
+            scene_lines.append(f"| {case.name} | {prepared.cells.n} | {k} | {n} | {'yes' if prepared.system.planar else 'no'} "
+                               f"| {'yes' if prepared.all_active else 'no'} | {prepared.reference_residual:.1e} "
+                               f"| {1e3 * prepared.assemble_seconds:.3g} | {1e3 * prepared.reference_seconds:.3g} |")
+            for method in methods:
+                dense_only = method.solver in qpsolvers.dense_solvers and method.solver not in qpsolvers.sparse_solvers
+                for tolerance in tolerances:
+                    bar.set_description(f"{case.name}: {method.label} {tolerance:g}")
+                    if dense_only and n > DENSE_MAX_UNKNOWNS:
+                        bar.update()
+                        continue  # dense-only backends are not run on large scenes (stated in the report)
+                    rows.append(run_one(prepared, method, tolerance, time_limit=args.time_limit, repeats=repeats))
+                    bar.update()
+    finished = datetime.now(timezone.utc)
+    write_csv(rows, args.out / "solvers.csv")
+    plot(rows, args.out / "solvers.png")
+    summary = summarize(rows, args.time_limit)
+    largest = max(cases, key=lambda c: next((r["unknowns"] for r in rows if r["scene"] == c.name), 0)).name
+    mid_tol = sorted(tolerances)[len(tolerances) // 2]
+    text = "\n".join([
+        f"# Solver comparison ({started:%Y-%m-%d %H:%M} to {finished:%H:%M} UTC)",
+        "",
+        f"Machine: {platform.machine()}, {multiprocessing.cpu_count()} cores, Python {platform.python_version()}, "
+        f"qpsolvers {qpsolvers.__version__}. Times are medians of up to {repeats} repeats (fewer once a run's repeats "
+        f"took {REPEAT_BUDGET:g} s), time limit {args.time_limit:g} s per solve. Tolerances: "
+        f"{', '.join(f'{t:g}' for t in tolerances)}.",
+        "",
+        "## Scenes",
+        "",
+        "| scene | cells | colliding contacts | unknowns | planar | all contacts active | reference KKT residual "
+        "| assemble [ms] | references [ms] |",
+        "|---|---|---|---|---|---|---|---|---|",
+        *scene_lines,
+        "",
+        "## Summary per method",
+        "",
+        f"Success: converged (the solver's flag and the package's checks) and distance to the reference ≤ "
+        f"max({ACCURACY_FACTOR:g}·tolerance, {ACCURACY_FLOOR:g}). SGM: shifted geometric mean of setup + solve time "
+        f"(shift {1e3 * SGM_SHIFT:g} ms), unsuccessful runs counted at the time limit; ratio to the best.",
+        "",
+        markdown_table(summary),
+        "",
+        f"## Largest scene ({largest}) at tolerance {mid_tol:g}",
+        "",
+        scene_table(rows, largest, mid_tol),
+        "",
+    ])
+    (args.out / "solvers.md").write_text(text)
+    print(text)
+    print(f"wrote {args.out / 'solvers.csv'}, {args.out / 'solvers.png'}, {args.out / 'solvers.md'}")
+    return 0
