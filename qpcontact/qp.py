@@ -29,6 +29,7 @@ from typing import Any, Callable
 import numpy as np
 import qpsolvers
 import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from .errors import SolverNotInstalledError, UnknownSolverError
 from .linear import solve_min_norm
@@ -126,18 +127,23 @@ class QPOutcome:
 
 def build_problem(system: ContactSystem, formulation: str, form: str, regularization: float = 0.0) -> qpsolvers.Problem:
     """The qpsolvers Problem for a formulation and form (see the module docstring)."""
-    B, rhs = system.matrix.tocsc(), system.rhs
+    return _problem(system.matrix, system.rhs, formulation, form, regularization)
+
+
+def _problem(matrix: sp.spmatrix, rhs: np.ndarray, formulation: str, form: str, regularization: float) -> qpsolvers.Problem:
+    """:func:`build_problem` for ``B̃ = matrix``, ``b̃ = rhs`` (a whole system or one block)."""
+    B = matrix.tocsc()
     k, n = B.shape
     if formulation == "complementarity" and form == "primal":
         return qpsolvers.Problem(P=sp.identity(n, format="csc"), q=np.zeros(n), G=-B, h=-rhs)
     if formulation == "complementarity" and form == "contact":
-        return qpsolvers.Problem(P=system.delassus(), q=-rhs, lb=np.zeros(k), ub=np.full(k, np.inf))
+        return qpsolvers.Problem(P=(B @ B.T).tocsc(), q=-rhs, lb=np.zeros(k), ub=np.full(k, np.inf))
     if formulation == "least_squares":
         if form == "primal":
             top, width = regularization * sp.identity(n, format="csc"), n
             eq = sp.hstack([B, -sp.identity(k)], format="csc")
         else:
-            a = system.delassus()
+            a = (B @ B.T).tocsc()
             top, width = regularization * a, k
             eq = sp.hstack([a, -sp.identity(k)], format="csc")
         P = sp.block_diag([top, sp.identity(k)], format="csc")
@@ -163,6 +169,29 @@ def _status(solution: qpsolvers.Solution) -> tuple[str, int | None]:
     return str(status).rsplit(".", 1)[-1], None if iterations is None else int(iterations)
 
 
+def independent_blocks(matrix: sp.spmatrix, min_rows: int = 0) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The independent subproblems of ``B̃ ỹ ≥ b̃``: connected components of the contact graph
+    (rows and columns linked by the non-zeros of ``B̃``), as ``(rows, columns)`` index arrays in
+    increasing order. Consecutive components are merged into blocks of about ``min_rows`` rows
+    (the components starting in the same window of ``min_rows`` rows; a component is never cut):
+    fewer, larger backend calls, since each call has a fixed cost. Blocks without rows (columns
+    with no non-zero, whose answer is 0) are left out."""
+    k, n = matrix.shape
+    pattern = sp.csr_matrix((np.ones(matrix.nnz, dtype=np.int8), matrix.indices, matrix.indptr), shape=(k, n))
+    n_comp, label = connected_components(sp.bmat([[None, pattern], [pattern.T, None]], format="csr"), directed=False)
+    sizes = np.bincount(label[:k], minlength=n_comp)
+    block = np.unique((np.cumsum(sizes) - sizes) // max(min_rows, 1), return_inverse=True)[1][label]
+    row_block, col_block = block[:k], block[k:]
+    n_blocks = int(block.max()) + 1
+    rows = np.split(np.argsort(row_block, kind="stable"), np.cumsum(np.bincount(row_block, minlength=n_blocks))[:-1])
+    cols = np.split(np.argsort(col_block, kind="stable"), np.cumsum(np.bincount(col_block, minlength=n_blocks))[:-1])
+    return [(r, c) for r, c in zip(rows, cols) if r.size]
+
+
+#: Blocks handed to a backend have about this many contacts (see :func:`independent_blocks`).
+BLOCK_ROWS = 2000
+
+
 def solve_qp_system(
     system: ContactSystem,
     solver: str,
@@ -173,15 +202,64 @@ def solve_qp_system(
     time_limit: float | None = None,
     regularization: float = 0.0,
     settings: dict[str, Any] | None = None,
+    split: bool = True,
 ) -> QPOutcome:
     """Solve the system's QP with one qpsolvers backend. Never raises for a backend failure:
-    the outcome says what happened (``found``, ``status``, ``error``)."""
+    the outcome says what happened (``found``, ``status``, ``error``).
+
+    With ``split`` (default) the independent components of the contact graph are solved as
+    separate QPs (merged into blocks of about :data:`BLOCK_ROWS` contacts): the same problem,
+    but each part stops when it is converged instead of waiting for the hardest one. ``found`` is
+    true only if every block was solved; ``iterations`` is the largest of the blocks'."""
     check_solver(solver)
+    options = {**_tolerance_settings(solver, tolerance, time_limit, formulation), **(settings or {})}
+    B, rhs = system.matrix, system.rhs
+    k, n = B.shape
     t0 = time.perf_counter()
-    problem = build_problem(system, formulation, form, regularization)
+    blocks = independent_blocks(B, BLOCK_ROWS) if split else [(np.arange(k), np.arange(n))]
+    if len(blocks) == 1:
+        out = _solve_block(B, rhs, solver, formulation, form, regularization, options)
+        out.setup_seconds = time.perf_counter() - t0 - out.solve_seconds  # includes finding the blocks
+        out.extras["blocks"] = 1
+        return out
+    y, lam = np.zeros(n), np.zeros(k)
+    has_lam, statuses, iterations, setup, solve = True, [], [], time.perf_counter() - t0, 0.0
+    for rows, cols in blocks:
+        if time_limit is not None:
+            remaining = time_limit - (time.perf_counter() - t0)
+            if remaining <= 0:
+                return QPOutcome(None, None, False, "time limit reached", max(iterations, default=None), setup, solve,
+                                 error=f"time limit of {time_limit} s reached after {len(statuses)} of {len(blocks)} blocks")
+            options = {**options, **_tolerance_settings(solver, tolerance, remaining, formulation), **(settings or {})}
+        t1 = time.perf_counter()
+        sub = B[rows][:, cols]
+        setup += time.perf_counter() - t1
+        out = _solve_block(sub, rhs[rows], solver, formulation, form, regularization, options)
+        setup, solve = setup + out.setup_seconds, solve + out.solve_seconds
+        if out.y is None or not out.found:
+            out.setup_seconds, out.solve_seconds = setup, solve
+            out.status = f"{out.status} (block of {rows.size} contacts)"
+            return out
+        y[cols] = out.y
+        if out.lam is None:
+            has_lam = False
+        else:
+            lam[rows] = out.lam
+        statuses.append(out.status)
+        if out.iterations is not None:
+            iterations.append(out.iterations)
+    status = " / ".join(dict.fromkeys(statuses))
+    return QPOutcome(y, lam if has_lam else None, True, status, max(iterations, default=None), setup, solve,
+                     extras={"blocks": len(blocks)})
+
+
+def _solve_block(B: sp.spmatrix, rhs: np.ndarray, solver: str, formulation: str, form: str, regularization: float,
+                 options: dict[str, Any]) -> QPOutcome:
+    """One backend call on ``B̃ ỹ ≥ b̃`` (a whole system or one independent block)."""
+    t0 = time.perf_counter()
+    problem = _problem(B, rhs, formulation, form, regularization)
     if solver in qpsolvers.dense_solvers and solver not in qpsolvers.sparse_solvers:
         problem = qpsolvers.Problem(*(m.toarray() if sp.issparse(m) else m for m in problem.unpack()))
-    options = {**_tolerance_settings(solver, tolerance, time_limit, formulation), **(settings or {})}
     t1 = time.perf_counter()
     try:
         with warnings.catch_warnings():
@@ -191,10 +269,9 @@ def solve_qp_system(
         return QPOutcome(None, None, False, "error", None, t1 - t0, time.perf_counter() - t1, error=f"{type(exc).__name__}: {exc}")
     status, iterations = _status(solution)
     x = solution.x
-    k, n = system.shape
+    k, n = B.shape
     y = lam = None
     if x is not None and np.all(np.isfinite(x)):
-        B = system.matrix
         if formulation == "complementarity" and form == "primal":
             y = x
             lam = None if solution.z is None or len(solution.z) != k else np.asarray(solution.z)

@@ -1,0 +1,399 @@
+"""``qpcontact bench``: time each phase of a contact step at colony scale.
+
+For each colony snapshot (2D monolayer and 3D biofilm from :mod:`qpcontact.scenes`, 10³–10⁵
+cells by default) the benchmark times, with repeats (median, min, max):
+
+- *detect*: :func:`~qpcontact.contacts.find_contacts` + :func:`~qpcontact.contacts.colliding`;
+- *assemble*: :func:`~qpcontact.system.build_system`;
+- *solve*, per solver: the plain linear solve (the floor), the QP backends through
+  :func:`~qpcontact.resolve.solve_system` (setup + solve), and the field's baseline, conjugate
+  gradient on the normal equations from zero as in CellModeller (:func:`cg_normal_equations`);
+- *check*: the error measures of :mod:`qpcontact.metrics` on one answer.
+
+Every answer is verified, untimed, against a high-accuracy reference: the QP answers against
+:func:`~qpcontact.validation.reference_solution` (relative error ``‖x − x*‖_W/‖x*‖_W``, target
+1e-6), the linear and CG answers against the linear solve at 1e-12. Each snapshot runs in its own
+subprocess, so its peak resident memory (``ru_maxrss``, taken after the timed phases and before
+the verification) is that of one step. The scaling exponent of detection + assembly is the slope
+of a least-squares line through (log cells, log seconds).
+
+Output: a Markdown table and a log–log plot of time against cell count. The table is written
+between the markers ``<!-- bench:start -->`` / ``<!-- bench:end -->`` of the Markdown file (the
+rest of the file, e.g. the analysis in docs/performance.md, is kept), the raw numbers to JSON.
+``--profile`` writes a cProfile of one step of the largest snapshot.
+
+Example: ``flock /tmp/qpcontact-bench.lock qpcontact bench`` (full run, several minutes);
+``qpcontact bench --quick --out-dir /tmp/b`` (seconds).
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import dataclasses
+import datetime
+import io
+import json
+import os
+import platform
+import pstats
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from . import metrics, scenes
+from .cells import Cells
+from .contacts import colliding, find_contacts
+from .linear import solve_min_norm
+from .resolve import solve_system
+from .system import ContactSystem, build_system
+from .validation import reference_solution
+
+#: Solver specs ``name[/form]`` timed by default: the floor, the baseline, and the QP backends.
+DEFAULT_SOLVERS = ("linear", "cg", "osqp/primal", "osqp/contact", "clarabel/primal")
+#: The relative error every answer must reach (issue 6).
+TARGET_ERROR = 1e-6
+MARK_START, MARK_END = "<!-- bench:start -->", "<!-- bench:end -->"
+GENERATORS: dict[int, Callable[[int, int], Cells]] = {2: scenes.colony_2d, 3: scenes.colony_3d}
+
+
+# ------------------------------------------------------------------------------------------
+# The baseline: conjugate gradient on the normal equations (CellModeller)
+# ------------------------------------------------------------------------------------------
+def cg_normal_equations(system: ContactSystem, *, tol: float = TARGET_ERROR, max_iterations: int | None = None
+                        ) -> tuple[np.ndarray, int, bool]:
+    """CellModeller's solve: conjugate gradient on ``B̃ᵀB̃ ỹ = B̃ᵀb̃`` from zero, never forming
+    ``B̃ᵀB̃``. From zero the iterates stay in the row space, so CG converges to the
+    minimum-norm solution (in the scaled unknowns: minimum W-norm, the plain linear solve).
+
+    Returns ``(ỹ, iterations, converged)``; converged when ``‖B̃ᵀr‖ ≤ tol·‖B̃ᵀb̃‖``."""
+    B, rhs = system.matrix, system.rhs
+    n = B.shape[1]
+    normal = spla.LinearOperator((n, n), matvec=lambda v: B.T @ (B @ v), dtype=float)
+    count = [0]
+
+    def tick(_: np.ndarray) -> None:
+        count[0] += 1
+
+    y, info = spla.cg(normal, B.T @ rhs, rtol=tol, atol=0.0, maxiter=max_iterations or 10 * n, callback=tick)
+    return y, count[0], info == 0
+
+
+# ------------------------------------------------------------------------------------------
+# Scenes (cached: a 10⁵-cell snapshot takes longer to build than to solve)
+# ------------------------------------------------------------------------------------------
+def load_scene(dim: int, n: int, seed: int, cache_dir: Path | None) -> Cells:
+    """The colony snapshot ``colony_{dim}d(n, seed)``, from ``cache_dir`` if built before."""
+    path = None if cache_dir is None else cache_dir / f"colony_{dim}d_{n}_{seed}.npz"
+    if path is not None and path.exists():
+        with np.load(path) as data:
+            return Cells(**{f.name: data[f.name] for f in dataclasses.fields(Cells)})
+    cells = GENERATORS[dim](n, seed)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **{f.name: getattr(cells, f.name) for f in dataclasses.fields(Cells)})
+        tmp.replace(path)
+    return cells
+
+
+# ------------------------------------------------------------------------------------------
+# One snapshot (runs in a subprocess)
+# ------------------------------------------------------------------------------------------
+def _timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, list[float]]:
+    times, out = [], None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        times.append(time.perf_counter() - t0)
+    return out, times
+
+
+def _stats(times: list[float]) -> dict[str, float]:
+    return {"median": float(np.median(times)), "min": float(min(times)), "max": float(max(times))}
+
+
+def _parse_solver(spec: str) -> tuple[str, str, float | None]:
+    """``name[/form][@tolerance]`` → (name, form, tolerance or None for the default)."""
+    spec, _, tol = spec.partition("@")
+    name, _, form = spec.partition("/")
+    return name, form or "auto", float(tol) if tol else None
+
+
+def _detect(cells: Cells, planar: bool):
+    return colliding(find_contacts(cells, planar=planar))
+
+
+def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str], tolerance: float,
+                 time_limit: float | None, cache_dir: Path | None) -> dict[str, Any]:
+    """Time and verify one step on one snapshot; returns a JSON-ready record."""
+    cells = load_scene(dim, n, seed, cache_dir)
+    planar = dim == 2
+    (active, b), t_detect = _timed(lambda: _detect(cells, planar), repeats)
+    system, t_assemble = _timed(lambda: build_system(cells, active, b), repeats)
+    record: dict[str, Any] = {
+        "dim": dim, "cells": cells.n, "contacts": len(active), "unknowns": system.shape[1],
+        "detect": _stats(t_detect), "assemble": _stats(t_assemble), "solvers": {},
+    }
+    answers: dict[str, np.ndarray | None] = {}
+    for spec in solvers:
+        name, form, tol = _parse_solver(spec)
+        tol = tol or tolerance
+        row: dict[str, Any] = {"tolerance": tol}
+        if name == "cg":
+            (y, iterations, ok), times = _timed(lambda: cg_normal_equations(system, tol=tol), repeats)
+            row.update(converged=bool(ok), status="converged" if ok else "not converged", iterations=iterations)
+        else:
+            def call(name: str = name, form: str = form, tol: float = tol):
+                return solve_system(system, cells, solver=name, form=form, tolerance=tol, time_limit=time_limit)
+            (y, lam, info), times = _timed(call, repeats)
+            row.update(converged=bool(info["converged"]), status=str(info["status"]), iterations=info["iterations"],
+                       form=info["form"], message=info["message"])
+            if name != "linear" and y is not None and lam is not None:
+                (_, t_check) = _timed(lambda: (metrics.penetration(system, y), metrics.complementarity_residual(system, y, lam),
+                                               metrics.multiplier_consistency(system, y, lam),
+                                               metrics.physics(cells, system, system.to_impulses(y), system.to_contact_impulses(lam))), 1)
+                row["check"] = _stats(t_check)
+        row["solve"] = _stats(times)
+        answers[spec] = y
+        record["solvers"][spec] = row
+    record["peak_rss_mib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+    # Verification (untimed): the QPs against the complementarity reference, the linear solve and CG
+    # against the linear solve at 1e-12.
+    t0 = time.perf_counter()
+    linear_ref = solve_min_norm(system.matrix, system.rhs, tol=1e-12).y
+    qp_ref = reference_solution(system, "complementarity")
+    record["reference_seconds"] = time.perf_counter() - t0
+    record["linear_inactive"] = int(np.sum(solve_min_norm(system.matrix, system.rhs, tol=1e-12).lam <= 0))
+    for spec, y in answers.items():
+        name = _parse_solver(spec)[0]
+        ref = linear_ref if name in ("linear", "cg") else qp_ref
+        row = record["solvers"][spec]
+        row["reference"] = "linear" if name in ("linear", "cg") else "complementarity"
+        row["error"] = None if y is None else metrics.distance(y, ref)
+        row["penetration"] = None if y is None else metrics.penetration(system, y)
+        row["verified"] = bool(row["converged"] and row["error"] is not None and row["error"] <= TARGET_ERROR)
+    return record
+
+
+# ------------------------------------------------------------------------------------------
+# Report
+# ------------------------------------------------------------------------------------------
+def scaling_exponent(cells: list[int], seconds: list[float]) -> float | None:
+    """Slope of the least-squares line through ``(log cells, log seconds)``."""
+    if len(cells) < 2:
+        return None
+    return float(np.polyfit(np.log(cells), np.log(seconds), 1)[0])
+
+
+def _fmt(s: dict[str, float]) -> str:
+    return f"{s['median']:.3g} ({s['min']:.3g}–{s['max']:.3g})"
+
+
+def machine_description() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()}"
+
+
+def best_qp(record: dict[str, Any]) -> tuple[str, dict[str, Any]] | None:
+    """The fastest verified QP solver of a snapshot (median setup+solve)."""
+    rows = [(s, r) for s, r in record["solvers"].items() if _parse_solver(s)[0] not in ("linear", "cg") and r["verified"]]
+    return min(rows, key=lambda sr: sr[1]["solve"]["median"]) if rows else None
+
+
+def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
+    """The results as Markdown: a phase table, a per-solver table, and the scaling exponents."""
+    lines = [
+        f"Run {meta['date']} on {meta['machine']}; `{meta['command']}`. Times in seconds: median (min–max) of "
+        f"{meta['repeats']} repeats. Error: relative W-norm distance to the reference; verified = converged and "
+        f"error ≤ {TARGET_ERROR:g}.", "",
+        "| scene | cells | contacts | unknowns | detect | assemble | best QP (verified) | step = detect+assemble+QP | "
+        "linear floor | QP / linear | (detect+assemble) / step | peak RSS MiB |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in records:
+        best = best_qp(r)
+        lin = r["solvers"].get("linear")
+        da = r["detect"]["median"] + r["assemble"]["median"]
+        if best:
+            step = da + best[1]["solve"]["median"]
+            qp = f"{best[0]} {best[1]['solve']['median']:.3g}"
+            ratio = f"{best[1]['solve']['median'] / lin['solve']['median']:.2f}" if lin else "–"
+            share = f"{100 * da / step:.0f} %"
+            step_s = f"{step:.3g}"
+        else:
+            qp, ratio, share, step_s = "none verified", "–", "–", "–"
+        lines.append(
+            f"| {r['dim']}D | {r['cells']} | {r['contacts']} | {r['unknowns']} | {_fmt(r['detect'])} | {_fmt(r['assemble'])} | "
+            f"{qp} | {step_s} | {lin['solve']['median']:.3g} | {ratio} | {share} | {r['peak_rss_mib']:.0f} |"
+            if lin else
+            f"| {r['dim']}D | {r['cells']} | {r['contacts']} | {r['unknowns']} | {_fmt(r['detect'])} | {_fmt(r['assemble'])} | "
+            f"{qp} | {step_s} | – | – | {share} | {r['peak_rss_mib']:.0f} |"
+        )
+    lines += ["", "Per solver (solve = setup + solve through `solve_system`; check = the error measures on that answer):", "",
+              "| scene | cells | solver | solve | check | iterations | status | error | penetration | verified |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in records:
+        for spec, s in r["solvers"].items():
+            err = "–" if s.get("error") is None else f"{s['error']:.1e}"
+            pen = "–" if s.get("penetration") is None else f"{s['penetration']:.1e}"
+            check = _fmt(s["check"]) if "check" in s else "–"
+            lines.append(f"| {r['dim']}D | {r['cells']} | {spec} | {_fmt(s['solve'])} | {check} | {s.get('iterations')} | "
+                         f"{s['status']} | {err} | {pen} | {'yes' if s['verified'] else '**no**'} |")
+    lines += ["", "Fitted scaling exponent of detect + assemble (slope of log time against log cells):", ""]
+    for dim in sorted({r["dim"] for r in records}):
+        rs = [r for r in records if r["dim"] == dim]
+        exp = scaling_exponent([r["cells"] for r in rs], [r["detect"]["median"] + r["assemble"]["median"] for r in rs])
+        lines.append(f"- {dim}D, {rs[0]['cells']}–{rs[-1]['cells']} cells: "
+                     + ("–" if exp is None else f"**{exp:.2f}**"))
+    return "\n".join(lines) + "\n"
+
+
+def plot(records: list[dict[str, Any]], path: Path) -> None:
+    """Log–log plot of time against cell count: detect, assemble and each solver, per dimension."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    dims = sorted({r["dim"] for r in records})
+    fig, axes = plt.subplots(1, len(dims), figsize=(6 * len(dims), 4.5), squeeze=False)
+    for ax, dim in zip(axes[0], dims):
+        rs = [r for r in records if r["dim"] == dim]
+        n = [r["cells"] for r in rs]
+        ax.loglog(n, [r["detect"]["median"] for r in rs], "k--o", label="detect")
+        ax.loglog(n, [r["assemble"]["median"] for r in rs], "k:s", label="assemble")
+        for spec in rs[0]["solvers"]:
+            ax.loglog(n, [r["solvers"][spec]["solve"]["median"] for r in rs], "-o", label=spec)
+        ax.loglog(n, [n_i * 1e-5 for n_i in n], color="0.8", lw=4, zorder=0, label="∝ cells")
+        ax.set(xlabel="cells", ylabel="seconds (median)", title=f"{dim}D colony")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def write_markdown(path: Path, table: str, image: Path) -> None:
+    """Replace the text between the bench markers of ``path`` (create the file if needed)."""
+    rel = os.path.relpath(image, path.parent)
+    block = f"{MARK_START}\n{table}\n![time against cell count]({rel})\n{MARK_END}"
+    text = path.read_text() if path.exists() else "# Performance\n\n"
+    if MARK_START in text and MARK_END in text:
+        head, rest = text.split(MARK_START, 1)
+        text = head + block + rest.split(MARK_END, 1)[1]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def profile_step(dim: int, n: int, seed: int, solver: str, tolerance: float, cache_dir: Path | None, out: Path) -> str:
+    """cProfile of one step (detect, assemble, solve); writes ``out`` (pstats) and returns the top
+    functions by cumulative time as text."""
+    cells = load_scene(dim, n, seed, cache_dir)
+    name, form, tol = _parse_solver(solver)
+
+    def step() -> None:
+        active, b = _detect(cells, dim == 2)
+        solve_system(build_system(cells, active, b), cells, solver=name, form=form, tolerance=tol or tolerance)
+
+    prof = cProfile.Profile()
+    prof.runcall(step)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    prof.dump_stats(str(out))
+    text = io.StringIO()
+    pstats.Stats(prof, stream=text).sort_stats("cumulative").print_stats(30)
+    return text.getvalue()
+
+
+# ------------------------------------------------------------------------------------------
+# Command line
+# ------------------------------------------------------------------------------------------
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="qpcontact bench", description=__doc__.split("\n\n")[0])
+    p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="cell counts")
+    p.add_argument("--dims", type=int, nargs="+", default=[2, 3], choices=[2, 3])
+    p.add_argument("--repeats", type=int, default=3, help="timed repeats of each phase (median, min, max)")
+    p.add_argument("--solvers", nargs="+", default=list(DEFAULT_SOLVERS),
+                   help="linear, cg, or a qpsolvers backend with an optional /primal or /contact form")
+    p.add_argument("--tolerance", type=float, default=TARGET_ERROR, help="tolerance handed to the solvers")
+    p.add_argument("--time-limit", type=float, default=120.0, help="seconds per QP solve, where the backend supports it")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quick", action="store_true", help="tiny sizes (300, 1000), 2 repeats: a smoke test in seconds")
+    p.add_argument("--out-dir", type=Path, default=Path("docs"),
+                   help="writes performance.md (table between markers), img/performance.png, data/performance.json")
+    p.add_argument("--cache-dir", type=Path, default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "qpcontact-bench",
+                   help="where colony snapshots are cached ('none' to disable)")
+    p.add_argument("--profile", action="store_true",
+                   help="also write a cProfile of one step of the largest 2D snapshot (data/performance-profile.*)")
+    p.add_argument("--profile-solver", default="osqp/contact")
+    p.add_argument("--worker", nargs=2, type=int, metavar=("DIM", "N"), help=argparse.SUPPRESS)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    cache = None if str(args.cache_dir) == "none" else args.cache_dir
+    if args.quick:
+        args.sizes, args.repeats = [300, 1000], 2
+    if args.worker:  # one snapshot in this process; JSON on stdout
+        dim, n = args.worker
+        record = run_snapshot(dim, n, seed=args.seed, repeats=args.repeats, solvers=args.solvers,
+                              tolerance=args.tolerance, time_limit=args.time_limit, cache_dir=cache)
+        print(json.dumps(record))
+        return 0
+    records = []
+    common = ["--repeats", str(args.repeats), "--seed", str(args.seed), "--tolerance", repr(args.tolerance),
+              "--time-limit", repr(args.time_limit), "--cache-dir", str(args.cache_dir), "--solvers", *args.solvers]
+    for dim in args.dims:
+        for n in sorted(args.sizes):
+            print(f"bench: {dim}D, {n} cells ...", file=sys.stderr, flush=True)
+            t0 = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-m", "qpcontact.bench", "--worker", str(dim), str(n), *common],
+                                  capture_output=True, text=True)
+            if proc.returncode != 0:
+                print(proc.stderr, file=sys.stderr)
+                print(f"bench: worker for {dim}D, {n} cells failed (exit {proc.returncode})", file=sys.stderr)
+                return 1
+            records.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+            print(f"bench: {dim}D, {n} cells done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+    meta = {
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": machine_description(),
+        "command": "qpcontact bench " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "repeats": args.repeats,
+    }
+    out = args.out_dir
+    table = markdown(records, meta)
+    image = out / "img" / "performance.png"
+    plot(records, image)
+    write_markdown(out / "performance.md", table, image)
+    (out / "data").mkdir(parents=True, exist_ok=True)
+    (out / "data" / "performance.json").write_text(json.dumps({"meta": meta, "records": records}, indent=1))
+    if args.profile:
+        dim = 2 if 2 in args.dims else args.dims[0]
+        text = profile_step(dim, max(args.sizes), args.seed, args.profile_solver, args.tolerance, cache,
+                            out / "data" / "performance-profile.prof")
+        (out / "data" / "performance-profile.txt").write_text(text)
+    print(table)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
