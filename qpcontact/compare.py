@@ -181,7 +181,7 @@ def prepare(case: SceneCase) -> Prepared:
     active, b = colliding(find_contacts(cells), position_correction=case.position_correction, dt=case.dt)
     system = build_system(cells, active, b)
     t1 = time.perf_counter()
-    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-12)
+    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-10)  # as reference_solution does
     comp, residual = complementarity_reference(system)
     references = {"linear": lin.y, "least_squares": reference_solution(system, "least_squares"), "complementarity": comp}
     lam_scale = max(float(np.max(np.abs(lin.lam), initial=0.0)), 1e-300)
