@@ -382,6 +382,44 @@ def scene_table(rows: list[dict[str, Any]], scene: str, tolerance: float) -> str
     return "\n".join(lines)
 
 
+def fastest_table(rows: list[dict[str, Any]]) -> str:
+    """Per scene and tolerance, the fastest successful method of each formulation."""
+    groups = (("complementarity", ("complementarity",)), ("least_squares", ("least_squares",)), ("plain (Mx = b)", ("linear",)))
+    lines = ["| scene | tolerance | " + " | ".join(g for g, _ in groups) + " |", "|---|---|" + "---|" * len(groups)]
+    for scene in dict.fromkeys(r["scene"] for r in rows):
+        for tolerance in sorted({r["tolerance"] for r in rows}, reverse=True):
+            cells = []
+            for _, formulations in groups:
+                ok = [r for r in rows if r["scene"] == scene and r["tolerance"] == tolerance and r["success"]
+                      and r["formulation"] in formulations]
+                best = min(ok, key=lambda r: r["total_s"], default=None)
+                cells.append("none succeeded" if best is None else
+                             f"{best['solver']}/{best['form']} {1e3 * best['total_s']:.3g} ms")
+            lines.append(f"| {scene} | {tolerance:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def form_table(rows: list[dict[str, Any]]) -> str:
+    """Per backend and formulation: how often each form succeeded, and the median over the runs
+    where both did of time(primal)/time(contact) and distance(primal)/distance(contact)."""
+    lines = ["| backend | formulation | primal success | contact success | median time primal/contact "
+             "| median distance primal/contact |", "|---|---|---|---|---|---|"]
+    index = {(r["scene"], r["tolerance"], r["solver"], r["formulation"], r["form"]): r for r in rows}
+    for solver, formulation in dict.fromkeys((r["solver"], r["formulation"]) for r in rows if r["form"] in FORMS):
+        pairs = [(index.get((sc, t, solver, formulation, "primal")), index.get((sc, t, solver, formulation, "contact")))
+                 for sc, t in dict.fromkeys((r["scene"], r["tolerance"]) for r in rows)]
+        pairs = [(p, c) for p, c in pairs if p is not None and c is not None]
+        if not pairs:
+            continue
+        both = [(p, c) for p, c in pairs if p["success"] and c["success"]]
+        t_ratio = [p["total_s"] / c["total_s"] for p, c in both if c["total_s"] > 0]
+        d_ratio = [max(p["distance"], 1e-16) / max(c["distance"], 1e-16) for p, c in both]
+        rate = lambda form: np.mean([(p if form == "primal" else c)["success"] for p, c in pairs])  # noqa: E731
+        lines.append(f"| {solver} | {formulation} | {100 * rate('primal'):.0f} % | {100 * rate('contact'):.0f} % "
+                     f"| {np.median(t_ratio) if t_ratio else math.nan:.2g} | {np.median(d_ratio) if d_ratio else math.nan:.2g} |")
+    return "\n".join(lines)
+
+
 SOLVER_STYLE = {
     "linear": ("k", "*"), "cg": ("tab:gray", "v"), "cg_euclidean": ("tab:brown", "1"), "bbpgd": ("tab:pink", "P"),
     "clarabel": ("tab:blue", "o"), "osqp": ("tab:orange", "s"), "piqp": ("tab:green", "D"), "proxqp": ("tab:red", "^"),
@@ -546,6 +584,14 @@ def main(argv: list[str] | None = None) -> int:
         f"(shift {1e3 * SGM_SHIFT:g} ms), unsuccessful runs counted at the time limit; ratio to the best.",
         "",
         markdown_table(summary),
+        "",
+        "## Fastest successful method per scene and tolerance",
+        "",
+        fastest_table(rows),
+        "",
+        "## Primal against contact form",
+        "",
+        form_table(rows),
         "",
         f"## Largest scene ({largest}) at tolerance {mid_tol:g}",
         "",
