@@ -142,6 +142,22 @@ def solve_system(
         if formulation == "complementarity" and out.lam is not None:
             # Feasible but not optimal (e.g. impulses larger than needed) shows up here.
             checks["has relative duality gap"] = metrics.duality_gap(system, out.y, out.lam)
+            # Impulses that are not equal and opposite contact impulses (primal form: ỹ and the
+            # duals disagree), or contact impulses that pull: both seen without scaling
+            # (docs/stability.md), where they cancel inside the duality gap.
+            checks["has multiplier inconsistency"] = metrics.multiplier_consistency(system, out.y, out.lam)
+            checks["pulls with relative contact impulse"] = max(0.0, -float(out.lam.min(initial=0.0))) / max(
+                float(np.abs(out.lam).max(initial=0.0)), 1e-300)
+        if formulation == "least_squares":
+            # Feasible is not optimal: when Mx = b is consistent the optimum has B̃ỹ = b̃, and an
+            # answer overshooting it (seen without scaling, docs/stability.md) must not pass.
+            try:
+                lin = solve_min_norm(system.matrix, system.rhs, tol=1e-10)
+            except SolverFailedError:
+                lin = None
+            if lin is not None and lin.consistent:
+                checks["overshoots by"] = float(np.max(np.abs(system.matrix @ out.y - system.rhs))) / float(
+                    np.max(np.abs(system.rhs)))
         for what, value in checks.items():
             if not value <= limit:
                 info.update(converged=False, message=f"{solver} reported success but the answer {what} {value:.3g} "

@@ -1,0 +1,380 @@
+"""The stability report: every installed solver × formulation on the catalogue of stiff and
+extreme cases (:mod:`qpcontact.catalogue`), with and without the internal scaling.
+
+``qpcontact stability [--cases PATTERN] [--time-limit S] [--out docs/data/stability]`` writes
+``<out>.csv`` (one row per case × solver × formulation × scaling, every measure) and
+``<out>.md`` (the case × solver matrix and the failures with their messages).
+
+Each run is classified as one of
+
+- ``ok``: :func:`qpcontact.resolve` returned a converged result and every check below passed;
+- ``error``: resolve raised a documented :class:`~qpcontact.errors.QPContactError` (for a solver
+  that did not deliver, :class:`~qpcontact.errors.SolverFailedError`); its message is kept;
+- ``wrong``: resolve returned a converged result that fails a check: silent garbage, a bug;
+- ``crash``: resolve raised something that is not a QPContactError: a bug;
+- ``timeout``: the run did not finish within the wall-clock guard (the backend ignored its time
+  limit): a hang.
+
+Checks of a converged result (all dimensionless, computed on the *scaled* system of the case, so
+that runs with ``scale=False`` are measured the same way):
+
+- every impulse finite;
+- penetration ≤ the reference's + :data:`KKT_LIMIT`;
+- distance ``‖x − x*‖_W/‖x*‖_W`` to the reference ``x*`` of the same formulation
+  (:func:`qpcontact.validation.reference_solution`; for the plain linear solve the
+  minimum-norm solve at :data:`REFERENCE_TOLERANCE`) ≤ :data:`DISTANCE_LIMIT`;
+- relative duality gap and multiplier consistency (where the solver gives contact impulses)
+  ≤ :data:`KKT_LIMIT` (the complementarity residual is reported, not checked: interior-point
+  methods drive it down only like the square root of their tolerance, measured 1e-4–5e-4 on
+  the jammed packings with distances to the reference below 1e-5);
+- linear and angular momentum change ≤ :data:`KKT_LIMIT`;
+- relative kinetic energy change ≤ :data:`KKT_LIMIT` (inelastic contact; skipped for cases with
+  position correction, which legitimately adds energy to clear overlaps).
+
+Every run happens in a forked child process killed after the guard, so no backend can hang the
+report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import fnmatch
+import multiprocessing
+import platform
+import time
+import traceback
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import metrics
+from .catalogue import CATALOGUE, Case
+from .cells import Cells
+from .contacts import Contacts, colliding, find_contacts
+from .errors import QPContactError
+from .linear import solve_min_norm
+from .qp import FORMULATIONS, available_solvers
+from .resolve import DEFAULT_FORM, resolve
+from .system import ContactSystem, build_system
+from .validation import reference_solution
+
+#: Solver tolerance of every run (dimensionless).
+TOLERANCE = 1e-6
+#: Largest accepted residual of the optimality conditions (penetration above the reference's,
+#: complementarity, multiplier consistency, momentum, energy): 100 × the tolerance, the same
+#: factor resolve's acceptance test uses.
+KKT_LIMIT = 100 * TOLERANCE
+#: Largest accepted distance to the reference solution, ``‖x − x*‖_W/‖x*‖_W``.
+DISTANCE_LIMIT = 1e-3
+#: Optimality tolerance of the reference linear solve (LSMR cannot reach 1e-12 on the jammed
+#: packings: it stops at 3e-11).
+REFERENCE_TOLERANCE = 1e-10
+#: Outcomes, best first.
+OUTCOMES = ("ok", "error", "wrong", "crash", "timeout")
+
+
+@dataclass
+class Prepared:
+    """A catalogue case built, with its scaled system and reference solutions.
+
+    Attributes:
+        case: the catalogue entry.
+        cells, contacts: the scene and the contacts handed to resolve (None: found by resolve).
+        system: the scaled system of the colliding contacts (None if nothing collides).
+        references: formulation (``"linear"`` for the plain solve) -> reference ``ỹ*``.
+        reference_penetration: formulation -> penetration of its reference.
+        condition: ``cond₁`` estimate of the scaled Delassus operator (None: singular, LU failed).
+        condition_seconds: time of the linear solve with the estimate.
+        linear_seconds: time of the same solve without it.
+    """
+
+    case: Case
+    cells: Cells
+    contacts: Contacts | None
+    system: ContactSystem | None
+    references: dict[str, np.ndarray]
+    reference_penetration: dict[str, float]
+    condition: float | None
+    condition_seconds: float
+    linear_seconds: float
+
+
+def prepare(case: Case, seed: int = 0, size: dict[str, Any] | None = None) -> Prepared:
+    """Build the case's scene and system, and compute the references and condition estimate."""
+    cells = case.make(seed, **(size or {}))
+    contacts = case.contacts(cells) if case.contacts else None
+    found = contacts if contacts is not None else find_contacts(cells)
+    opts = {k: v for k, v in case.options.items() if k in ("position_correction", "dt")}
+    active, b = colliding(found, **opts)
+    if len(active) == 0:
+        return Prepared(case, cells, contacts, None, {}, {}, None, 0.0, 0.0)
+    system = build_system(cells, active, b)
+    t0 = time.perf_counter()
+    lin = solve_min_norm(system.matrix, system.rhs, tol=REFERENCE_TOLERANCE)
+    t1 = time.perf_counter()
+    with_cond = solve_min_norm(system.matrix, system.rhs, tol=REFERENCE_TOLERANCE, estimate_condition=True)
+    t2 = time.perf_counter()
+    references = {"linear": lin.y}
+    for formulation in FORMULATIONS:
+        references[formulation] = reference_solution(system, formulation)
+    pen = {name: metrics.penetration(system, y) for name, y in references.items()}
+    return Prepared(case, cells, contacts, system, references, pen, with_cond.condition_estimate, t2 - t1, t1 - t0)
+
+
+def runs(solvers: list[str], formulations: list[str], forms: list[str]) -> list[tuple[str, str, str]]:
+    """(solver, formulation, form) triples: the plain linear solve once, every QP backend with
+    every formulation and form."""
+    out = []
+    for solver in solvers:
+        if solver == "linear":
+            out.append(("linear", "linear", "contact"))
+            continue
+        for formulation in formulations:
+            for form in forms:
+                out.append((solver, formulation, DEFAULT_FORM[formulation] if form == "auto" else form))
+    return out
+
+
+def check(prep: Prepared, formulation: str, impulses: np.ndarray, contact_impulses: np.ndarray | None) -> dict[str, Any]:
+    """Every measure of a converged answer (on the case's scaled system) and the checks that
+    failed (``failed``: list of names)."""
+    system = prep.system
+    y = system.from_impulses(impulses)
+    measures: dict[str, Any] = {"penetration": metrics.penetration(system, y),
+                                "distance": metrics.distance(y, prep.references[formulation])}
+    failed = []
+    if not (np.all(np.isfinite(impulses)) and (contact_impulses is None or np.all(np.isfinite(contact_impulses)))):
+        return {**measures, "failed": ["finite"]}
+    if contact_impulses is not None:
+        lam = contact_impulses * system.operator_scale**2 / system.velocity_scale
+        measures["multiplier_consistency"] = metrics.multiplier_consistency(system, y, lam)
+        if formulation == "complementarity":
+            measures["complementarity"] = metrics.complementarity_residual(system, y, lam)
+            measures["duality_gap"] = metrics.duality_gap(system, y, lam)
+    physics = metrics.physics(prep.cells, system, impulses, contact_impulses)
+    measures.update(momentum_change=physics["momentum_change"], angular_momentum_change=physics["angular_momentum_change"],
+                    energy_change_relative=physics["energy_change_relative"])
+    if measures["penetration"] > prep.reference_penetration[formulation] + KKT_LIMIT:
+        failed.append("penetration")
+    if measures["distance"] > DISTANCE_LIMIT:
+        failed.append("distance")
+    for name in ("multiplier_consistency", "duality_gap", "momentum_change", "angular_momentum_change"):
+        if measures.get(name, 0.0) > KKT_LIMIT:
+            failed.append(name)
+    if not prep.case.options.get("position_correction") and measures["energy_change_relative"] > KKT_LIMIT:
+        failed.append("energy")
+    measures["failed"] = failed
+    return measures
+
+
+def run_one(prep: Prepared, solver: str, formulation: str, form: str, scale: bool, time_limit: float) -> dict[str, Any]:
+    """Resolve the case once and classify the outcome (see the module docstring)."""
+    row: dict[str, Any] = {"case": prep.case.name, "family": prep.case.family, "solver": solver,
+                           "formulation": formulation, "form": form, "scale": scale}
+    kwargs = {} if solver == "linear" else {"formulation": formulation, "form": form}
+    t0 = time.perf_counter()
+    try:
+        result = resolve(prep.cells, solver=solver, contacts=prep.contacts, tolerance=TOLERANCE, time_limit=time_limit,
+                         scale=scale, **kwargs, **prep.case.options)
+    except QPContactError as exc:
+        return {**row, "outcome": "error", "seconds": time.perf_counter() - t0,
+                "message": f"{type(exc).__name__}: {exc}"}
+    except Exception as exc:  # noqa: BLE001 - anything else is a bug, reported as such
+        return {**row, "outcome": "crash", "seconds": time.perf_counter() - t0,
+                "message": f"{type(exc).__name__}: {exc} | {traceback.format_exc(limit=3)}"}
+    row.update(seconds=result.times["total"], solve_seconds=result.times["solve"], status=result.status,
+               iterations=result.iterations)
+    if prep.system is None:
+        return {**row, "outcome": "ok" if result.status == "no_contact" else "wrong", "message": "no colliding contact"}
+    measures = check(prep, formulation, result.impulses, result.contact_impulses)
+    failed = measures.pop("failed")
+    row.update(measures)
+    row["outcome"] = "wrong" if failed else "ok"
+    row["message"] = f"converged, but fails: {', '.join(failed)}" if failed else ""
+    return row
+
+
+def _child(conn: Any, prep: Prepared, args: tuple) -> None:
+    try:
+        conn.send(run_one(prep, *args))
+    except BaseException as exc:  # noqa: BLE001 - report whatever happened to the parent
+        conn.send({"outcome": "crash", "message": f"{type(exc).__name__}: {exc}"})
+    finally:
+        conn.close()
+
+
+def guarded(prep: Prepared, solver: str, formulation: str, form: str, scale: bool, time_limit: float,
+            guard: float) -> dict[str, Any]:
+    """:func:`run_one` in a forked child, killed after ``guard`` seconds (outcome ``timeout``)."""
+    # forkserver, not fork: a child forked from a parent that already ran Clarabel (the
+    # references) can deadlock on the inherited thread pool (measured: 20 s guard hit on a solve
+    # that takes 0.08 s in a fresh process).
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["qpcontact.stability"])
+    parent, child = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(child, prep, (solver, formulation, form, scale, time_limit)))
+    t0 = time.perf_counter()
+    proc.start()
+    child.close()
+    row = None
+    if parent.poll(guard):
+        try:
+            row = parent.recv()
+        except EOFError:
+            row = None
+    proc.join(timeout=1.0)
+    if proc.is_alive():
+        proc.kill()
+        proc.join()
+    base = {"case": prep.case.name, "family": prep.case.family, "solver": solver, "formulation": formulation,
+            "form": form, "scale": scale}
+    if row is None:
+        elapsed = time.perf_counter() - t0
+        if elapsed >= guard:
+            return {**base, "outcome": "timeout", "seconds": elapsed,
+                    "message": f"no answer within the {guard:g} s guard (time_limit {time_limit:g} s was not honoured)"}
+        return {**base, "outcome": "crash", "seconds": elapsed, "message": f"child process died (exit code {proc.exitcode})"}
+    return {**base, **row}
+
+
+# ------------------------------------------------------------------------------------------
+# Output
+# ------------------------------------------------------------------------------------------
+CSV_FIELDS = ("case", "family", "solver", "formulation", "form", "scale", "outcome", "seconds", "solve_seconds",
+              "status", "iterations", "penetration", "distance", "complementarity", "duality_gap", "multiplier_consistency",
+              "momentum_change", "angular_momentum_change", "energy_change_relative", "message")
+
+
+def _fmt(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.3g}"
+    return str(value)
+
+
+def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
+    with path.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=CSV_FIELDS, extrasaction="ignore")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: _fmt(row.get(k)) for k in CSV_FIELDS})
+
+
+def _column(row: dict[str, Any]) -> str:
+    if row["solver"] == "linear":
+        return "linear"
+    short = {"complementarity": "C", "least_squares": "LS"}[row["formulation"]]
+    return f"{row['solver']} {short}" + ("" if row["form"] == DEFAULT_FORM[row["formulation"]] else f" ({row['form']})")
+
+
+def _cell(row: dict[str, Any]) -> str:
+    outcome = row["outcome"]
+    if outcome == "ok":
+        return f"ok {row['seconds'] * 1e3:.3g}ms"
+    if outcome == "wrong":
+        return "**WRONG** " + row["message"].removeprefix("converged, but fails: ")
+    return {"error": "error", "crash": "**CRASH**", "timeout": "**TIMEOUT**"}[outcome]
+
+
+def matrix_markdown(rows: list[dict[str, Any]], preps: dict[str, Prepared], scale: bool) -> str:
+    """The case × solver matrix of one scaling."""
+    rows = [r for r in rows if r["scale"] == scale]
+    columns = list(dict.fromkeys(_column(r) for r in rows))
+    cases = list(dict.fromkeys(r["case"] for r in rows))
+    table = {(r["case"], _column(r)): _cell(r) for r in rows}
+    lines = ["| case | K × n | cond₁(Ã) | " + " | ".join(columns) + " |", "|---" * (len(columns) + 3) + "|"]
+    for case in cases:
+        prep = preps[case]
+        shape = "×".join(map(str, prep.system.shape)) if prep.system is not None else "0"
+        cond = "singular" if prep.condition is None else f"{prep.condition:.1e}"
+        lines.append(f"| {case} | {shape} | {cond} | " + " | ".join(table.get((case, c), "") for c in columns) + " |")
+    return "\n".join(lines)
+
+
+def summary_markdown(rows: list[dict[str, Any]]) -> str:
+    """Per solver column and scaling: counts of each outcome, median time and distance of the
+    correct answers."""
+    columns = list(dict.fromkeys(_column(r) for r in rows))
+    lines = ["| solver | scaled: ok / error / wrong / crash / timeout | median ms | median distance "
+             "| unscaled: ok / error / wrong / crash / timeout | median ms | median distance |",
+             "|---|---|---|---|---|---|---|"]
+    for col in columns:
+        parts = [col]
+        for scale in (True, False):
+            sel = [r for r in rows if _column(r) == col and r["scale"] == scale]
+            counts = " / ".join(str(sum(r["outcome"] == o for r in sel)) for o in OUTCOMES)
+            good = [r for r in sel if r["outcome"] == "ok"]
+            ms = f"{np.median([r['seconds'] for r in good]) * 1e3:.3g}" if good else "–"
+            dist = f"{np.median([r['distance'] for r in good]):.1e}" if good else "–"
+            parts += [counts, ms, dist]
+        lines.append("| " + " | ".join(parts) + " |")
+    return "\n".join(lines)
+
+
+def failures_markdown(rows: list[dict[str, Any]]) -> str:
+    """Every run that is not ``ok``, with its message (one line)."""
+    lines = ["| case | solver | scaled | outcome | message |", "|---|---|---|---|---|"]
+    for r in rows:
+        if r["outcome"] != "ok":
+            message = " ".join(str(r.get("message", "")).split())[:220].replace("|", "\\|")
+            lines.append(f"| {r['case']} | {_column(r)} | {'yes' if r['scale'] else 'no'} | {r['outcome']} | {message} |")
+    return "\n".join(lines)
+
+
+def write_markdown(rows: list[dict[str, Any]], preps: dict[str, Prepared], path: Path, header: str) -> None:
+    text = [header, "## Summary per solver\n", summary_markdown(rows), "\n## Scaled (default)\n",
+            matrix_markdown(rows, preps, True)]
+    if any(not r["scale"] for r in rows):
+        text += ["\n## Unscaled (`scale=False`)\n", matrix_markdown(rows, preps, False)]
+    text += ["\n## Every run that is not ok\n", failures_markdown(rows), ""]
+    path.write_text("\n".join(text))
+
+
+# ------------------------------------------------------------------------------------------
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="qpcontact stability", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", default="*", help="fnmatch pattern(s) of case names, comma separated")
+    parser.add_argument("--solvers", default=",".join(available_solvers()), help="comma-separated solver names")
+    parser.add_argument("--formulations", default=",".join(FORMULATIONS))
+    parser.add_argument("--forms", default="primal,contact", help="QP forms to run (primal, contact)")
+    parser.add_argument("--scaling", default="on,off", help="on, off or on,off")
+    parser.add_argument("--time-limit", type=float, default=20.0, help="solver time limit [s] (where supported)")
+    parser.add_argument("--guard", type=float, default=60.0, help="wall-clock limit of one run [s]")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", default="docs/data/stability", help="output path without extension")
+    args = parser.parse_args(argv)
+
+    from tqdm import tqdm
+
+    patterns = args.cases.split(",")
+    cases = [c for name, c in CATALOGUE.items() if any(fnmatch.fnmatch(name, p) for p in patterns)]
+    triples = runs(args.solvers.split(","), args.formulations.split(","), args.forms.split(","))
+    scalings = [s == "on" for s in args.scaling.split(",")]
+    preps: dict[str, Prepared] = {}
+    rows: list[dict[str, Any]] = []
+    started = datetime.now(timezone.utc)
+    with tqdm(total=len(cases) * len(triples) * len(scalings), unit="run") as bar:
+        for case in cases:
+            bar.set_description(case.name)
+            prep = preps[case.name] = prepare(case, args.seed)
+            for scale in scalings:
+                for solver, formulation, form in triples:
+                    rows.append(guarded(prep, solver, formulation, form, scale, args.time_limit, args.guard))
+                    bar.update()
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_csv(rows, out.with_suffix(".csv"))
+    header = (f"# Stability run\n\n{started:%Y-%m-%d %H:%M} UTC, {platform.node()} ({multiprocessing.cpu_count()} cores, "
+              f"{platform.processor() or platform.machine()}), seed {args.seed}, tolerance {TOLERANCE:g}, time limit "
+              f"{args.time_limit:g} s, guard {args.guard:g} s; single runs (times are of one run, not medians).\n"
+              f"Command: `qpcontact stability {' '.join(argv or [])}`\n")
+    write_markdown(rows, preps, out.with_suffix(".md"), header)
+    counts = {o: sum(r["outcome"] == o for r in rows) for o in OUTCOMES}
+    print(f"{len(rows)} runs: " + ", ".join(f"{v} {k}" for k, v in counts.items()))
+    print(f"wrote {out.with_suffix('.csv')} and {out.with_suffix('.md')}")
+    return 0 if counts["wrong"] == counts["crash"] == counts["timeout"] == 0 else 1
