@@ -278,14 +278,21 @@ def required_velocity_change(
 
 
 def colliding(
-    contacts: Contacts, *, position_correction: float = 0.0, dt: float | None = None
+    contacts: Contacts, *, position_correction: float = 0.0, dt: float | None = None,
+    keep_separating: bool = False,
 ) -> tuple[Contacts, np.ndarray]:
     """The colliding contacts and their right-hand sides ``b > 0``.
 
     A contact collides when it is within the margin it was found with and approaches
     (``b = −u > 0``); with position correction, also when it overlaps and does not separate fast
     enough to clear the overlap within the step.
+
+    ``keep_separating=True`` keeps every contact (``b <= 0`` too) as soon as one collides: the
+    impulses at colliding contacts can drive a separating neighbour into approach, which only
+    its own constraint ``(Mx)_k >= b_k`` prevents (for the complementarity formulation).
     """
     b = required_velocity_change(contacts, position_correction=position_correction, dt=dt)
     mask = b > 0
+    if keep_separating and mask.any():
+        mask[:] = True
     return contacts.subset(mask), b[mask]

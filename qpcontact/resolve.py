@@ -188,6 +188,7 @@ def resolve(
     solver_settings: dict[str, Any] | None = None,
     estimate_condition: bool = False,
     on_failure: str = "raise",
+    keep_separating: bool = False,
 ) -> Result:
     """Resolve the contacts of one timestep.
 
@@ -216,6 +217,10 @@ def resolve(
         estimate_condition: also estimate the condition number of the scaled Delassus operator.
         on_failure: ``"raise"`` a :class:`~qpcontact.errors.SolverFailedError` (default), or
             ``"return"`` the unconverged result (with ``cells`` unchanged).
+        keep_separating: also put the contacts that do not collide (``b <= 0``) into the system
+            when any contact collides, so impulses elsewhere cannot drive them into approach
+            (:func:`qpcontact.contacts.colliding`). Complementarity QPs only: the plain solve and
+            least_squares would pull separating contacts together.
 
     Returns:
         A :class:`Result`.
@@ -228,7 +233,10 @@ def resolve(
     t_start = time.perf_counter()
     if contacts is None:
         contacts = find_contacts(cells, margin, planar=bool(planar))
-    active, b = colliding(contacts, position_correction=position_correction, dt=dt)
+    if keep_separating and (solver == "linear" or formulation != "complementarity"):
+        raise InvalidArgumentError("keep_separating needs a QP solver with formulation='complementarity' "
+                                   f"(got solver {solver!r}, formulation {formulation!r})")
+    active, b = colliding(contacts, position_correction=position_correction, dt=dt, keep_separating=keep_separating)
     t_detect = time.perf_counter()
     n_cells = cells.n
     if len(active) == 0:  # nothing to solve: never hand an unconstrained QP to a backend

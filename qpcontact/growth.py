@@ -1,0 +1,229 @@
+"""Growth and division of a colony, with lineage.
+
+Growth: each cell elongates exponentially at its own rate ``r`` [1/time]. The drive is the
+growth momentum ``g = G·l̇`` with ``l̇ = l (e^{r dt} − 1)/dt``, so that a free cell reaches
+exactly ``l e^{r dt}`` after a step; contacts compress it through the growth degree of freedom
+(the contact solve changes ``g`` like any other momentum). Mass and growth inertia grow in
+proportion to the volume (constant density).
+
+Division: a cell whose length reaches the division length splits into two daughters along its
+axis, touching at the parent's centre, each with half the parent's mass, growth inertia and
+momenta (so linear momentum is conserved, and angular momentum about any point too: the
+daughters' centres are symmetric about the parent's). Volume: two capsules of the parent's
+radius that fit exactly in the parent's outline have length ``l/2 − ρ`` each and hold
+``2/3 π ρ³`` less than the parent (the new pair of caps). Daughters that were given their full
+half volume at once (length ``l/2 − 2ρ/3``) would poke ``ρ/3`` out of the parent's poles, and
+two neighbours dividing end to end in the same step would then overlap by a third of a
+diameter — an overlap made by bookkeeping, not by the contact solve. So each daughter is born
+with length ``l/2 − ρ`` and an owed length ``ρ/3`` (``Colony.owed``), which it grows on top of
+its own growth (at most its own growth again per step, i.e. at up to twice its rate) through
+the contact solve, which pushes the neighbours out of the way. Volume including what is owed
+(``volumes(cells) + π ρ² owed``) is conserved exactly by division.
+
+Noise: each daughter's axis is turned by a small random angle (``axis_noise``, radians) to
+break the symmetry of a perfect chain, and may draw its own growth rate (``rate_noise``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .cells import Cells
+from .errors import InvalidArgumentError
+from .step import StepResult, rotate, step
+
+
+@dataclass(frozen=True, eq=False)
+class Colony:
+    """A growing colony: the cells plus what growth and lineage need, one entry per cell.
+
+    Attributes:
+        cells: the cells (:class:`qpcontact.Cells`).
+        ids: (N,) unique cell ids (int).
+        parent_ids: (N,) the id of each cell's mother, ``-1`` for a founder.
+        rates: (N,) exponential elongation rate ``r`` [1/time].
+        owed: (N,) length still owed to the cell from its division [length] (module docstring).
+        time: the simulated time [time].
+        next_id: the id the next newborn cell gets (default: one more than the largest id).
+    """
+
+    cells: Cells
+    ids: np.ndarray
+    parent_ids: np.ndarray
+    rates: np.ndarray
+    owed: Any = 0.0
+    time: float = 0.0
+    next_id: int = -1
+
+    def __post_init__(self) -> None:
+        n = self.cells.n
+        for name, dtype in (("ids", np.int64), ("parent_ids", np.int64), ("rates", float), ("owed", float)):
+            arr = np.asarray(getattr(self, name), dtype=dtype)
+            if name == "owed" and arr.ndim == 0:
+                arr = np.full(n, float(arr))
+            if arr.shape != (n,):
+                raise InvalidArgumentError(f"Colony.{name}: expected shape ({n},), got {arr.shape}")
+            object.__setattr__(self, name, arr)
+        for name in ("rates", "owed"):
+            arr = getattr(self, name)
+            if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+                raise InvalidArgumentError(f"Colony.{name}: must be finite and >= 0")
+        if np.unique(self.ids).size != n:
+            raise InvalidArgumentError("Colony.ids: must be unique")
+        if self.next_id < 0:
+            object.__setattr__(self, "next_id", int(self.ids.max(initial=-1)) + 1)
+        elif n and self.next_id <= int(self.ids.max()):
+            raise InvalidArgumentError(f"Colony.next_id: {self.next_id} is not above the largest id {int(self.ids.max())}")
+
+    @classmethod
+    def founder(cls, cells: Cells, rates: Any) -> "Colony":
+        """A colony of founder cells (ids 0..N-1, no parents) growing at ``rates`` [1/time]."""
+        rates = np.broadcast_to(np.asarray(rates, dtype=float), (cells.n,))
+        return cls(cells, np.arange(cells.n), np.full(cells.n, -1), rates)
+
+    def replace(self, **changes: Any) -> "Colony":
+        """A new, validated Colony with some fields replaced."""
+        return dataclasses.replace(self, **changes)
+
+
+def volumes(cells: Cells) -> np.ndarray:
+    """(N,) capsule volumes ``π ρ² l + 4/3 π ρ³`` [length³]."""
+    return np.pi * cells.radii**2 * (cells.lengths + 4.0 / 3.0 * cells.radii)
+
+
+def growth_step(colony: Colony, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The length each cell is driven to grow over ``dt`` [length]: ``l (e^{r dt} − 1)`` plus
+    the part of its owed length it pays now (at most as much again). Returns
+    ``(length_increase, owed_paid)``."""
+    own = colony.cells.lengths * np.expm1(colony.rates * dt)
+    paid = np.minimum(colony.owed, own)
+    return own + paid, paid
+
+
+def growth_drive(cells: Cells, length_increase: np.ndarray, dt: float) -> np.ndarray:
+    """(N,) growth momentum ``g = G·Δl/dt`` [mass·length/time] that grows a free cell by
+    ``length_increase`` over the step (0 for a non-growing cell, ``G = inf``)."""
+    growing = np.isfinite(cells.growth_inertia)
+    return np.where(growing, np.where(growing, cells.growth_inertia, 0.0) * length_increase / dt, 0.0)
+
+
+def divide(colony: Colony, division_length: float, rng: np.random.Generator, *,
+           axis_noise: float = 0.02, rate_noise: float = 0.0, base_rate: float | None = None,
+           planar: bool = False) -> Colony:
+    """Split every cell with ``l >= division_length`` into two daughters (module docstring).
+
+    Args:
+        colony: the colony.
+        division_length: the length threshold [length]; must exceed ``2ρ`` so that daughters
+            get a positive length.
+        rng: random numbers for the noise.
+        axis_noise: standard deviation of each daughter's axis turn [rad].
+        rate_noise: relative standard deviation of a daughter's growth rate around ``base_rate``
+            (0 = daughters inherit the mother's rate).
+        base_rate: mean growth rate for newborn cells (default: the mother's rate).
+        planar: 2D monolayer: turn the axes about z only, so they stay in the xy-plane.
+
+    Returns:
+        The new colony: each mother replaced by daughter 1 (in her place), daughter 2 appended;
+        new ids, parent ids set. The colony itself when no cell divides.
+    """
+    cells = colony.cells
+    dividing = np.flatnonzero(cells.lengths >= division_length)
+    if dividing.size == 0:
+        return colony
+    radii, lengths, axes = cells.radii[dividing], cells.lengths[dividing], cells.axes[dividing]
+    daughter_length = lengths / 2 - radii
+    if np.any(daughter_length <= 0):
+        raise InvalidArgumentError(f"division_length {division_length!r} is too short: daughters need l/2 > ρ")
+    owed = colony.owed[dividing] / 2 + radii / 3.0
+    shift = (daughter_length / 2 + radii)[:, None] * axes
+    m = dividing.size
+    both_axes = np.concatenate([axes, axes])
+    if planar:
+        turns = np.zeros((2 * m, 3))
+        turns[:, 2] = rng.normal(0.0, axis_noise, 2 * m)
+    else:
+        turns = rng.normal(0.0, axis_noise, (2 * m, 3))
+        turns -= np.einsum("ij,ij->i", turns, both_axes)[:, None] * both_axes  # a spin about â turns nothing
+    new_axes = rotate(both_axes, turns)
+
+    def split(mother_values: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
+        """Daughter 1 takes the mother's place, daughter 2 is appended."""
+        out = mother_values.copy()
+        out[dividing] = first
+        return np.concatenate([out, second])
+
+    halves = {name: getattr(cells, name)[dividing] / 2
+              for name in ("masses", "growth_inertia", "momenta", "angular_momenta", "growth_momenta")}
+    daughters = Cells(
+        centers=split(cells.centers, cells.centers[dividing] - shift, cells.centers[dividing] + shift),
+        axes=split(cells.axes, new_axes[:m], new_axes[m:]),
+        lengths=split(cells.lengths, daughter_length, daughter_length),
+        radii=split(cells.radii, radii, radii),
+        **{name: split(getattr(cells, name), half, half) for name, half in halves.items()},
+    )
+    mean_rate = colony.rates[dividing] if base_rate is None else np.full(m, float(base_rate))
+    noise = rng.standard_normal((2, m)) if rate_noise else np.zeros((2, m))
+    daughter_rates = np.maximum(mean_rate * (1.0 + rate_noise * noise), 0.0)
+    new_ids = colony.next_id + np.arange(2 * m)
+    mother_ids = colony.ids[dividing]
+    return colony.replace(
+        cells=daughters,
+        ids=split(colony.ids, new_ids[:m], new_ids[m:]),
+        parent_ids=split(colony.parent_ids, mother_ids, mother_ids),
+        rates=split(colony.rates, daughter_rates[0], daughter_rates[1]),
+        owed=split(colony.owed, owed, owed),
+        next_id=colony.next_id + 2 * m,
+    )
+
+
+def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.ndarray | None = None,
+         **step_options: Any) -> tuple[Colony, StepResult]:
+    """One growth step (no division; call :func:`divide` after it).
+
+    The growth drive (:func:`growth_drive` of :func:`growth_step`) enters as the growth momentum
+    — overdamped, as the growth column of ``drive``; inertial, by setting ``g`` (growth is a
+    biological motor, not inertia) — then :func:`qpcontact.step.step` with ``step_options``.
+    ``drive`` adds user-given momenta (its growth column is ignored). Afterwards masses and
+    growth inertias grow with the volume including what is owed (constant density), and the
+    owed length drops by what was paid. Returns the colony at ``t + dt`` and the step's result
+    (whose ``cells`` are the colony's).
+    """
+    cells = colony.cells
+    increase, paid = growth_step(colony, dt)
+    g = growth_drive(cells, increase, dt)
+    if dynamics == "overdamped":
+        full = np.zeros((cells.n, 7)) if drive is None else np.array(drive, dtype=float, copy=True)
+        full[:, 6] = g
+        drive = full
+    else:
+        cells = cells.replace(growth_momenta=g)
+        if drive is not None:
+            drive = np.array(drive, dtype=float, copy=True)
+            drive[:, 6] = 0.0
+    out = step(cells, dt, dynamics=dynamics, drive=drive, **step_options)
+    owed = colony.owed - paid
+    area = np.pi * cells.radii**2
+    swell = (volumes(out.cells) + area * owed) / (volumes(cells) + area * colony.owed)
+    out.cells = out.cells.replace(masses=out.cells.masses * swell, growth_inertia=out.cells.growth_inertia * swell)
+    return colony.replace(cells=out.cells, owed=owed, time=colony.time + dt), out
+
+
+def expansion_time_step(colony: Colony, *, max_dt: float, cfl: float = 0.2, dimensions: int = 2) -> float:
+    """A time step at which the colony's edge moves at most ``cfl`` cell diameters per step.
+
+    A colony of radius R growing at rate r with every cell pushing outwards expands at its edge
+    with speed about ``r R / dimensions`` (the area, or volume, grows at rate r). Velocity-level
+    contact handling is first order in the step, so the step must shrink as the colony grows;
+    the speed is estimated from the geometry, not from the last step's velocities (those include
+    the position-correction speeds ``β·overlap/dt``, which would feed back into ``dt``).
+    """
+    cells = colony.cells
+    reach = np.linalg.norm(cells.centers - cells.centers.mean(axis=0), axis=1) + cells.lengths / 2 + cells.radii
+    speed = float(colony.rates.max(initial=0.0)) * float(reach.max()) / dimensions
+    diameter = 2.0 * float(np.median(cells.radii))
+    return max_dt if speed <= 0 else min(max_dt, cfl * diameter / speed)

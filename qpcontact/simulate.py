@@ -1,0 +1,239 @@
+"""``qpcontact simulate``: grow a colony from one cell, save snapshots and draw pictures.
+
+Units: lengths in µm (cells of radius 0.5 µm dividing at a cylinder length of 4 µm), time in
+mean doubling times (growth rate ln 2), masses in arbitrary units (mass = volume, growth inertia
+``G`` = ``--growth-inertia`` × mass). Every step: :func:`qpcontact.growth.grow` (growth drive,
+contact solve, move), then :func:`qpcontact.growth.divide`; the step size follows the colony's
+expansion (:func:`qpcontact.growth.expansion_time_step`).
+
+Outputs in ``--out`` (default ``colony-run``):
+
+- ``snapshots/step_NNNNNN.npz``: colony snapshots (format: :mod:`qpcontact.snapshots`), every
+  ``--snapshot-every`` steps and the last one;
+- ``history.csv``: one row per step (time, dt, cells, contacts, largest/mean overlap as a
+  fraction of the diameter, solver seconds, step seconds, residuals);
+- ``colony.png`` (cells coloured by orientation), ``history.png`` (cell count, overlap, solver
+  time and residual against time), and with ``--gif`` an animation ``colony.gif``.
+
+A step whose contact solve fails is never applied: the run stops there, says why, saves what
+it has and exits with status 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tqdm import tqdm
+
+from .cells import Cells
+from .errors import QPContactError, SolverFailedError
+from .growth import Colony, divide, expansion_time_step, grow
+from .snapshots import load_colony, save_colony
+from .surfaces import substrate
+
+HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
+                  "step_seconds", "penetration", "complementarity")
+
+
+@dataclass
+class Settings:
+    """Everything that defines a colony run (the command-line options, as values)."""
+
+    cells: int = 2000
+    dimensions: int = 2
+    solver: str = "clarabel"
+    formulation: str = "complementarity"
+    form: str = "auto"
+    tolerance: float = 1e-4
+    position_correction: float = 0.5
+    margin: float = 0.3
+    cfl: float = 0.3
+    max_dt: float = 0.05
+    radius: float = 0.5
+    division_length: float = 4.0
+    rate: float = float(np.log(2.0))
+    rate_noise: float = 0.1
+    axis_noise: float = 0.02
+    growth_inertia: float = 1000.0
+    dynamics: str = "overdamped"
+    damping: float = 0.0
+    sink_speed: float = 0.5
+    seed: int = 1
+    max_steps: int = 100_000
+
+
+@dataclass
+class Run:
+    """The outcome of :func:`run_colony`."""
+
+    colony: Colony
+    history: dict[str, list[float]]
+    wall_seconds: float
+    steps: int
+    error: str = ""
+    frames: list[tuple[float, Cells]] = field(default_factory=list)
+
+
+def founder(settings: Settings) -> Colony:
+    """One cell at the origin along x (on the substrate in 3D), half the division length long."""
+    z = settings.radius if settings.dimensions == 3 else 0.0
+    volume = np.pi * settings.radius**2 * (settings.division_length / 2 + 4 / 3 * settings.radius)
+    cell = Cells(centers=[[0.0, 0.0, z]], axes=[[1.0, 0.0, 0.0]], lengths=settings.division_length / 2,
+                 radii=settings.radius, masses=volume, growth_inertia=settings.growth_inertia * volume)
+    return Colony.founder(cell, settings.rate)
+
+
+def run_colony(settings: Settings, *, start: Colony | None = None, progress: bool = True,
+               snapshot_dir: Path | None = None, snapshot_every: int = 0, frame_growth: float = 0.0) -> Run:
+    """Grow a colony until it has ``settings.cells`` cells (or ``max_steps`` steps).
+
+    Args:
+        settings: the run's parameters.
+        start: the colony to start from (default: :func:`founder`).
+        progress: show a tqdm progress bar (cells reached out of the target).
+        snapshot_dir: where to save snapshots (None: none saved).
+        snapshot_every: save every this many steps (0: only the last state).
+        frame_growth: keep a frame for an animation whenever the cell count has grown by this
+            factor since the last frame (0: no frames).
+
+    Returns:
+        A :class:`Run`. A failed contact solve ends the run early with ``error`` set (the
+        failed step is not applied).
+    """
+    rng = np.random.default_rng(settings.seed)
+    colony = founder(settings) if start is None else start
+    planar = settings.dimensions == 2
+    planes = [] if planar else [substrate(0.0)]
+    options: dict[str, Any] = dict(
+        solver=settings.solver, formulation=settings.formulation, form=settings.form, tolerance=settings.tolerance,
+        margin=settings.margin, position_correction=settings.position_correction, planes=planes,
+        planar=True if planar else None, dynamics=settings.dynamics)
+    if settings.dynamics == "inertial":
+        options["damping"] = settings.damping
+    history: dict[str, list[float]] = {name: [] for name in HISTORY_FIELDS}
+    frames = [(colony.time, colony.cells)] if frame_growth else []
+    bar = tqdm(total=settings.cells, initial=colony.cells.n, unit="cell", disable=not progress, file=sys.stderr)
+    error = ""
+    t_start = time.perf_counter()
+    step = 0
+    while colony.cells.n < settings.cells and step < settings.max_steps:
+        dt = expansion_time_step(colony, max_dt=settings.max_dt, cfl=settings.cfl)
+        drive = None
+        if not planar and settings.sink_speed:
+            drive = np.zeros((colony.cells.n, 7))
+            drive[:, 2] = -settings.sink_speed * np.where(np.isfinite(colony.cells.masses), colony.cells.masses, 0.0)
+        t0 = time.perf_counter()
+        try:
+            colony, out = grow(colony, dt, drive=drive, **options)
+        except SolverFailedError as exc:
+            error = f"step {step} (t = {colony.time:.4g}, {colony.cells.n} cells): contact solve failed, not applied: {exc}"
+            break
+        colony = divide(colony, settings.division_length, rng, axis_noise=settings.axis_noise,
+                        rate_noise=settings.rate_noise, base_rate=settings.rate, planar=planar)
+        result = out.result
+        row = dict(step=step, time=colony.time, dt=dt, cells=colony.cells.n, contacts=len(result.contacts),
+                   max_overlap=out.max_overlap, mean_overlap=out.mean_overlap,
+                   solve_seconds=result.times["setup"] + result.times["solve"], step_seconds=time.perf_counter() - t0,
+                   penetration=result.errors.get("penetration", 0.0),
+                   complementarity=result.errors.get("complementarity", np.nan))
+        for name in HISTORY_FIELDS:
+            history[name].append(row[name])
+        step += 1
+        bar.update(colony.cells.n - bar.n)
+        bar.set_postfix(t=f"{colony.time:.2f}", overlap=f"{out.max_overlap:.3f}", refresh=False)
+        if snapshot_dir is not None and snapshot_every and step % snapshot_every == 0:
+            save_colony(snapshot_dir / f"step_{step:06d}.npz", colony, step)
+        if frame_growth and colony.cells.n >= frame_growth * frames[-1][1].n:
+            frames.append((colony.time, colony.cells))
+    bar.close()
+    wall = time.perf_counter() - t_start
+    if snapshot_dir is not None:
+        save_colony(snapshot_dir / f"step_{step:06d}.npz", colony, step)
+    if frame_growth and frames[-1][1] is not colony.cells:
+        frames.append((colony.time, colony.cells))
+    return Run(colony, history, wall, step, error, frames)
+
+
+def write_history(path: Path, history: dict[str, list[float]]) -> Path:
+    """The per-step history as CSV (columns :data:`HISTORY_FIELDS`)."""
+    with open(path, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(HISTORY_FIELDS)
+        writer.writerows(zip(*(history[name] for name in HISTORY_FIELDS)))
+    return path
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    d = Settings()
+    p = argparse.ArgumentParser(prog="qpcontact simulate", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--cells", type=int, default=d.cells, help="grow until the colony has this many cells")
+    p.add_argument("--dimensions", type=int, choices=(2, 3), default=d.dimensions,
+                   help="2: monolayer in the xy-plane (planar unknowns only); 3: a biofilm on a substrate plane z = 0")
+    p.add_argument("--solver", default=d.solver, help="'linear' or an installed qpsolvers backend")
+    p.add_argument("--formulation", default=d.formulation, choices=("complementarity", "least_squares"))
+    p.add_argument("--form", default=d.form, choices=("auto", "primal", "contact"))
+    p.add_argument("--tolerance", type=float, default=d.tolerance, help="solver tolerance (dimensionless)")
+    p.add_argument("--position-correction", type=float, default=d.position_correction,
+                   help="β: fraction of each overlap cleared per step (0 = off)")
+    p.add_argument("--margin", type=float, default=d.margin, help="speculative contact margin [µm]")
+    p.add_argument("--cfl", type=float, default=d.cfl, help="edge displacement per step [diameters]")
+    p.add_argument("--max-dt", type=float, default=d.max_dt, help="largest time step [doubling times]")
+    p.add_argument("--radius", type=float, default=d.radius, help="cell radius [µm]")
+    p.add_argument("--division-length", type=float, default=d.division_length, help="cylinder length at division [µm]")
+    p.add_argument("--rate", type=float, default=d.rate, help="mean growth rate [1/doubling time]")
+    p.add_argument("--rate-noise", type=float, default=d.rate_noise, help="relative spread of newborn growth rates")
+    p.add_argument("--axis-noise", type=float, default=d.axis_noise, help="daughter axis turn at division [rad]")
+    p.add_argument("--growth-inertia", type=float, default=d.growth_inertia,
+                   help="G/m: how hard contacts find it to compress growth")
+    p.add_argument("--dynamics", choices=("overdamped", "inertial"), default=d.dynamics)
+    p.add_argument("--damping", type=float, default=d.damping, help="inertial only: damping rate [1/time]")
+    p.add_argument("--sink-speed", type=float, default=d.sink_speed,
+                   help="3D only: every cell is driven towards the substrate at this speed [µm/time]")
+    p.add_argument("--seed", type=int, default=d.seed, help="random seed (division noise)")
+    p.add_argument("--max-steps", type=int, default=d.max_steps)
+    p.add_argument("--start", type=Path, help="start from this snapshot (.npz) instead of one cell")
+    p.add_argument("--out", type=Path, default=Path("colony-run"), help="output folder")
+    p.add_argument("--snapshot-every", type=int, default=0, help="save a snapshot every N steps (0: only the last)")
+    p.add_argument("--gif", action="store_true", help="also write an animation colony.gif")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(sys.argv[1:] if argv is None else argv)
+    names = {f for f in Settings.__dataclass_fields__}
+    settings = Settings(**{k: v for k, v in vars(args).items() if k in names})
+    from .plots import animate, plot_history, save_colony_picture  # matplotlib only when drawing
+
+    try:
+        start = load_colony(args.start)[0] if args.start else None
+        run = run_colony(settings, start=start, progress=not args.quiet, snapshot_dir=args.out / "snapshots",
+                         snapshot_every=args.snapshot_every, frame_growth=1.08 if args.gif else 0.0)
+    except QPContactError as exc:
+        print(f"qpcontact simulate: {exc}", file=sys.stderr)
+        return 2
+    out = args.out
+    write_history(out / "history.csv", run.history)
+    label = f"{settings.dimensions}D, {settings.solver}/{settings.formulation}, tol {settings.tolerance:g}"
+    save_colony_picture(out / "colony.png", run.colony.cells,
+                        f"{run.colony.cells.n} cells at t = {run.colony.time:.2f} ({label})")
+    if run.steps:
+        plot_history(out / "history.png", run.history, label)
+    if args.gif:
+        animate(out / "colony.gif", run.frames)
+    h = run.history
+    print(f"{run.colony.cells.n} cells in {run.steps} steps, t = {run.colony.time:.3f}, wall {run.wall_seconds:.1f} s; "
+          f"largest overlap {max(h['max_overlap'], default=0.0):.4f} of a diameter; "
+          f"contact solve {np.sum(h['solve_seconds']):.1f} s in total; outputs in {out}/")
+    if run.error:
+        print(f"qpcontact simulate: {run.error}", file=sys.stderr)
+        return 1
+    return 0

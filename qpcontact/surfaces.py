@@ -1,0 +1,89 @@
+"""Static planes (a substrate, the walls of a channel) as one-sided contacts.
+
+A plane is a point on it and a unit normal pointing to the side where the cells live. A capsule
+touches a plane at the ends of its axis segment (the closest points of a segment to a plane are
+an end, or the whole segment when it lies parallel; the two ends then carry the contact, so a
+rod lying flat cannot tip through the plane). The contacts have ``cell_b = -1`` (a static body:
+zero velocity, infinite mass) and go into the same system as cell–cell contacts
+(:func:`qpcontact.concatenate`). Fixed cells are ordinary cells with ``masses = inf``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from .cells import Cells
+from .contacts import Contacts, concatenate, relative_normal_velocity
+from .errors import InvalidArgumentError
+
+
+@dataclass(frozen=True)
+class Plane:
+    """A static plane.
+
+    Attributes:
+        point: (3,) any point on the plane [length].
+        normal: (3,) normal pointing into the half-space where the cells are (normalized on
+            construction).
+    """
+
+    point: tuple[float, float, float]
+    normal: tuple[float, float, float]
+
+    def __post_init__(self) -> None:
+        point = np.asarray(self.point, dtype=float)
+        normal = np.asarray(self.normal, dtype=float)
+        if point.shape != (3,) or not np.all(np.isfinite(point)):
+            raise InvalidArgumentError(f"Plane.point: expected 3 finite numbers, got {self.point!r}")
+        norm = float(np.linalg.norm(normal)) if normal.shape == (3,) else 0.0
+        if not (np.isfinite(norm) and norm > 0):
+            raise InvalidArgumentError(f"Plane.normal: expected a finite non-zero 3-vector, got {self.normal!r}")
+        object.__setattr__(self, "point", tuple(point.tolist()))
+        object.__setattr__(self, "normal", tuple((normal / norm).tolist()))
+
+
+def substrate(height: float = 0.0) -> Plane:
+    """The plane ``z = height`` with cells above it (a surface under a 3D biofilm)."""
+    return Plane((0.0, 0.0, float(height)), (0.0, 0.0, 1.0))
+
+
+def channel(width: float, center_y: float = 0.0) -> list[Plane]:
+    """Two walls ``y = center_y ± width/2`` facing each other (a channel along x)."""
+    if not (np.isfinite(width) and width > 0):
+        raise InvalidArgumentError(f"channel width: must be finite and > 0, got {width!r}")
+    return [Plane((0.0, center_y - width / 2, 0.0), (0.0, 1.0, 0.0)),
+            Plane((0.0, center_y + width / 2, 0.0), (0.0, -1.0, 0.0))]
+
+
+def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -> Contacts:
+    """Contacts of the cells' axis ends with each plane whose separation is below ``margin``.
+
+    Separation of an end ``q``: ``d = n·(q − p₀) − ρ`` (negative = overlap, or the cell is on
+    the wrong side). A sphere (``l = 0``) has one end. Normal ``n`` (from the plane, body b, to
+    the cell, body a); contact point ``q − ρn``; stretch ``±½`` (the ends ride with the tips).
+    """
+    parts = []
+    for plane in planes:
+        if not isinstance(plane, Plane):
+            raise InvalidArgumentError(f"planes: expected qpcontact.surfaces.Plane objects, got {type(plane).__name__}")
+        normal = np.asarray(plane.normal)
+        for side in (-0.5, 0.5):
+            offset_axis = side * cells.lengths[:, None] * cells.axes
+            ends = cells.centers + offset_axis
+            separation = (ends - np.asarray(plane.point)) @ normal - cells.radii
+            keep = separation < margin
+            if side > 0:
+                keep &= cells.lengths > 0  # a sphere has one end, counted once
+            cell = np.flatnonzero(keep)
+            k = cell.size
+            normals = np.broadcast_to(normal, (k, 3)).copy()
+            offset_a = offset_axis[cell] - cells.radii[cell, None] * normals
+            stretch_a = np.full(k, side)
+            static = np.full(k, -1, dtype=np.intp)
+            zeros3, zeros1 = np.zeros((k, 3)), np.zeros(k)
+            u = relative_normal_velocity(cells, cell, static, normals, offset_a, zeros3, stretch_a, zeros1)
+            parts.append(Contacts(cell, static, normals, offset_a, zeros3, stretch_a, zeros1, separation[cell], u))
+    return concatenate(parts)
