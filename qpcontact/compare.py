@@ -477,6 +477,52 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     plt.close(fig)
 
 
+def plot_scenes(cases: list[SceneCase], path: Path, max_cells: int = 1000) -> None:
+    """Top views of the scenes (colonies up to ``max_cells`` cells): each rod drawn as a segment
+    as thick as its diameter with round caps, coloured by orientation (planar scenes) or by
+    height (3D scenes; higher cells drawn on top)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import LineCollection
+
+    shown = [c for c in cases if (c.n_cells or 0) <= max_cells and c.position_correction == 0]
+    columns = min(4, len(shown))
+    n_rows = -(-len(shown) // columns)
+    fig, axes = plt.subplots(n_rows, columns, figsize=(3.6 * columns, 3.6 * n_rows), squeeze=False)
+    for ax in axes.flat[len(shown):]:
+        ax.set_visible(False)
+    for ax, case in zip(axes.flat, shown):
+        cells = make_scene(case.generator, case.n_cells)
+        half = 0.5 * cells.lengths[:, None] * cells.axes
+        ends = np.stack([cells.centers - half, cells.centers + half], axis=1)[:, :, :2]
+        z = cells.centers[:, 2]
+        if np.ptp(z) > 0:
+            colour = plt.cm.viridis((z - z.min()) / np.ptp(z))
+        else:
+            colour = plt.cm.hsv((np.arctan2(cells.axes[:, 1], cells.axes[:, 0]) % np.pi) / np.pi)
+        rho = float(cells.radii.max())
+        lo, hi = ends.reshape(-1, 2).min(axis=0) - 2 * rho, ends.reshape(-1, 2).max(axis=0) + 2 * rho
+        centre, span = 0.5 * (lo + hi), float((hi - lo).max())
+        ax.set_xlim(centre[0] - span / 2, centre[0] + span / 2)
+        ax.set_ylim(centre[1] - span / 2, centre[1] + span / 2)
+        ax.set_aspect("equal")
+        width_in = ax.get_position().width * fig.get_figwidth()
+        points_per_unit = 72.0 * width_in / span
+        order = np.argsort(z, kind="stable")
+        rods = order[cells.lengths[order] > 0]
+        spheres = order[cells.lengths[order] == 0]  # zero-length segments are not drawn: discs
+        ax.add_collection(LineCollection(ends[rods], colors=colour[rods], capstyle="round",
+                                         linewidths=2 * cells.radii[rods] * points_per_unit))
+        ax.scatter(cells.centers[spheres, 0], cells.centers[spheres, 1], c=colour[spheres],
+                   s=(2 * cells.radii[spheres] * points_per_unit) ** 2, linewidths=0)
+        ax.set_title(f"{case.name} ({cells.n} cells)", fontsize=9)
+        ax.tick_params(labelsize=7)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 # ------------------------------------------------------------------------------------------
 # Command
 # ------------------------------------------------------------------------------------------

@@ -387,7 +387,8 @@ def jammed_packing(n_cells: int = 61, seed: int = 0) -> Cells:
     n_cells = _check_count(n_cells, 7)
     rng = np.random.default_rng(seed)
     pitch = 2 * RADIUS * 0.95
-    rings = int(np.ceil((-3 + np.sqrt(9 + 12 * (n_cells - 1))) / 6)) + 2
+    # Hexagonal rings needed for n_cells (1 + 3r(r + 1) >= n), plus one ring for the wall.
+    rings = int(np.ceil((-3 + np.sqrt(9 + 12 * (n_cells - 1))) / 6)) + 1
     i, j = np.meshgrid(np.arange(-rings, rings + 1), np.arange(-rings, rings + 1), indexing="ij")
     i, j = i.ravel(), j.ravel()
     hex_dist = np.maximum(np.abs(i), np.maximum(np.abs(j), np.abs(i + j)))
@@ -395,7 +396,9 @@ def jammed_packing(n_cells: int = 61, seed: int = 0) -> Cells:
     pos = np.column_stack([pitch * (i + 0.5 * j), pitch * (np.sqrt(3) / 2) * j, np.zeros(i.size)])
     order = np.lexsort((np.arctan2(pos[:, 1], pos[:, 0]), np.linalg.norm(pos, axis=1)))
     inside = order[:n_cells]
-    wall = order[np.isin(order, np.flatnonzero(hex_dist == rings)) & ~np.isin(order, inside)]
+    # The wall: every site of the last ring and the unfilled sites of the ring before it, so
+    # it touches the outermost mobile spheres.
+    wall = order[np.isin(order, np.flatnonzero(hex_dist >= rings - 1)) & ~np.isin(order, inside)]
     centers = np.vstack([pos[inside], pos[wall]])
     n_all = centers.shape[0]
     axes = np.tile([1.0, 0.0, 0.0], (n_all, 1))
