@@ -21,7 +21,8 @@ process with a hard time-out, so a backend without a time limit of its own (or o
 cannot stop the comparison.
 
 Outputs in ``--out``: ``solvers.csv`` (every run), ``solvers.png`` (error against time, log–log,
-one panel per scene family and formulation), ``solvers.md`` (summary table).
+one panel per scene family and formulation), ``solvers_scenes.png`` (top views of the scenes),
+``solvers.md`` (summary tables).
 """
 
 from __future__ import annotations
@@ -605,6 +606,7 @@ def main(argv: list[str] | None = None) -> int:
     finished = datetime.now(timezone.utc)
     write_csv(rows, args.out / "solvers.csv")
     plot(rows, args.out / "solvers.png")
+    plot_scenes(cases, args.out / "solvers_scenes.png")
     summary = summarize(rows, args.time_limit)
     largest = max(cases, key=lambda c: next((r["unknowns"] for r in rows if r["scene"] == c.name), 0)).name
     mid_tol = sorted(tolerances)[len(tolerances) // 2]
@@ -646,5 +648,6 @@ def main(argv: list[str] | None = None) -> int:
     ])
     (args.out / "solvers.md").write_text(text)
     print(text)
-    print(f"wrote {args.out / 'solvers.csv'}, {args.out / 'solvers.png'}, {args.out / 'solvers.md'}")
+    print(f"wrote {args.out / 'solvers.csv'}, {args.out / 'solvers.png'}, {args.out / 'solvers_scenes.png'}, "
+          f"{args.out / 'solvers.md'}")
     return 0

@@ -44,6 +44,7 @@ def test_quick_run_writes_csv_png_and_table(tmp_path):
     # The plain solve is its own reference; OSQP at 1e-6 on complementarity is accurate.
     assert all(float(r["distance"]) < 1e-10 for r in rows if r["solver"] == "linear")
     assert all(r["success"] == "True" for r in rows if r["method"] == "osqp/complementarity/primal")
+    assert (out / "solvers_scenes.png").stat().st_size > 1000
     png = (out / "solvers.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 10_000
     text = (out / "solvers.md").read_text()
