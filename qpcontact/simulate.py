@@ -51,11 +51,11 @@ class Settings:
     solver: str = "clarabel"
     formulation: str = "complementarity"
     form: str = "auto"
-    tolerance: float = 1e-4
+    tolerance: float = 1e-6
     position_correction: float = 0.5
     margin: float = 0.3
     cfl: float = 0.3
-    max_dt: float = 0.05
+    max_dt: float = 0.02
     radius: float = 0.5
     division_length: float = 4.0
     rate: float = float(np.log(2.0))

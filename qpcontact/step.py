@@ -32,11 +32,14 @@ from typing import Any, Sequence
 import numpy as np
 
 from .cells import Cells
-from .contacts import Contacts, concatenate, find_contacts
+from .contacts import Contacts, concatenate, find_contacts, required_velocity_change
 from .errors import InvalidArgumentError, InvalidCellsError
 from .resolve import Result, resolve
 
 DYNAMICS = ("overdamped", "inertial")
+#: Contacts separating faster than this many times the largest collision are left out
+#: (:func:`drop_fast_separating`).
+SEPARATING_CUTOFF = 10.0
 #: Default ``parallel_sine`` of a step (about 11.5°; see :func:`step`).
 PARALLEL_SINE = 0.2
 
@@ -115,6 +118,19 @@ def speculative(contacts: Contacts, dt: float) -> Contacts:
     return dataclasses.replace(contacts, normal_velocity=contacts.normal_velocity + gap / dt)
 
 
+def drop_fast_separating(contacts: Contacts, position_correction: float, dt: float) -> Contacts:
+    """Leave out contacts that separate faster than :data:`SEPARATING_CUTOFF` times the largest
+    required velocity change of a colliding contact (``b < −cutoff·max b``): impulses of the size
+    the collisions need do not reverse them, and keeping them would set the system's velocity
+    scale (``max |b|``) by a contact that plays no part, so that the colliding ones look tiny to
+    the solver and its tolerance."""
+    b = required_velocity_change(contacts, position_correction=position_correction, dt=dt)
+    largest = float(b.max(initial=0.0))
+    if largest <= 0:
+        return contacts
+    return contacts.subset(b >= -SEPARATING_CUTOFF * largest)
+
+
 def momenta_before_contact(cells: Cells, dt: float, dynamics: str, drive: np.ndarray | None, damping: float) -> Cells:
     """Step 1 of the module docstring: the momenta the contact solve starts from."""
     if drive is not None:
@@ -167,8 +183,10 @@ def step(
             default is much larger than the one of ``find_contacts`` (see docs/colony.md).
         keep_separating: put every contact within the margin into the system as soon as one
             collides (see :func:`qpcontact.resolve`), so that pushing one neighbour cannot drive
-            it into another it was not approaching. None (default): on for the complementarity
-            QPs, off for ``solver="linear"`` and ``least_squares`` (which would pull).
+            it into another it was not approaching (contacts separating faster than
+            ``SEPARATING_CUTOFF`` times the largest collision are still left out:
+            :func:`drop_fast_separating`). None (default): on for the complementarity QPs, off
+            for ``solver="linear"`` and ``least_squares`` (which would pull).
         **resolve_options: passed to :func:`qpcontact.resolve` (``solver``, ``formulation``,
             ``form``, ``tolerance``, ``time_limit``, ``solver_settings``, ...).
 
@@ -201,7 +219,10 @@ def step(
     moving = momenta_before_contact(cells, dt, dynamics, drive, damping)
     contacts = concatenate([find_contacts(moving, margin, planar=bool(planar), parallel_sine=parallel_sine),
                             plane_contacts(moving, planes, margin)])
-    result = resolve(moving, contacts=speculative(contacts, dt), margin=margin, planar=planar,
+    candidates = speculative(contacts, dt)
+    if keep_separating:
+        candidates = drop_fast_separating(candidates, position_correction, dt)
+    result = resolve(moving, contacts=candidates, margin=margin, planar=planar,
                      position_correction=position_correction, dt=dt, keep_separating=keep_separating,
                      on_failure="raise", **resolve_options)
     fractions = overlap_fractions(cells, contacts)

@@ -1,0 +1,138 @@
+"""Error against run time over a whole colony run, for each solver and tolerance.
+
+Grows the same 2D colony (``qpcontact simulate`` defaults, seed 1) from one cell to --cells
+cells with every configuration below, --repeats times each, and records the wall time of the
+whole run (median of the repeats), the contact-solve time, and the overlaps reached: the largest
+over the run, the 99th percentile of the per-step largest, and the run's mean (time average of
+each step's mean overlap over the overlapping contacts), all as fractions of the diameter.
+
+Writes docs/data/colony_benchmark.csv, docs/data/colony_benchmark.md (table) and
+docs/img/colony_error_time.png. Run it under ``flock /tmp/qpcontact-bench.lock``:
+
+    flock /tmp/qpcontact-bench.lock python docs/data/colony_benchmark.py
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+
+import qpcontact
+from qpcontact.simulate import Settings, run_colony
+
+HERE = Path(__file__).resolve().parent
+
+#: (label, changes to the default Settings)
+CONFIGS = [
+    ("linear", dict(solver="linear")),
+    ("osqp 1e-3", dict(solver="osqp", tolerance=1e-3)),
+    ("osqp 1e-4", dict(solver="osqp", tolerance=1e-4)),
+    ("osqp 1e-6", dict(solver="osqp", tolerance=1e-6)),
+    ("clarabel 1e-4", dict(solver="clarabel", tolerance=1e-4)),
+    ("clarabel 1e-6", dict(solver="clarabel", tolerance=1e-6)),
+    ("clarabel 1e-8", dict(solver="clarabel", tolerance=1e-8)),
+    ("piqp 1e-4", dict(solver="piqp", tolerance=1e-4)),
+    ("piqp 1e-6", dict(solver="piqp", tolerance=1e-6)),
+    ("clarabel 1e-6, no position correction", dict(solver="clarabel", tolerance=1e-6, position_correction=0.0)),
+    ("clarabel 1e-6, half step (cfl 0.15)", dict(solver="clarabel", tolerance=1e-6, cfl=0.15)),
+]
+
+
+def measure(label: str, changes: dict, cells: int, repeats: int) -> dict:
+    walls, solves = [], []
+    run = None
+    for _ in range(repeats):
+        run = run_colony(dataclasses.replace(Settings(cells=cells), **changes), progress=False)
+        walls.append(run.wall_seconds)
+        solves.append(float(np.sum(run.history["solve_seconds"])))
+        if run.error:
+            break
+    h = {k: np.asarray(v, dtype=float) for k, v in run.history.items()}
+    return {
+        "config": label,
+        "solver": changes.get("solver"),
+        "tolerance": changes.get("tolerance", ""),
+        "cells": run.colony.cells.n,
+        "steps": run.steps,
+        "wall_s": float(np.median(walls)),
+        "solve_s": float(np.median(solves)),
+        "ms_per_step": 1e3 * float(np.median(walls)) / max(run.steps, 1),
+        "max_overlap": float(h["max_overlap"].max(initial=0.0)),
+        "p99_overlap": float(np.percentile(h["max_overlap"], 99)) if run.steps else 0.0,
+        "mean_overlap": float(h["mean_overlap"].mean()) if run.steps else 0.0,
+        "repeats": len(walls),
+        "error": run.error,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cells", type=int, default=500)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    installed = qpcontact.available_solvers()
+    rows = []
+    for label, changes in CONFIGS:
+        if changes["solver"] not in installed:
+            print(f"{label}: solver not installed, skipped")
+            continue
+        t0 = time.perf_counter()
+        row = measure(label, changes, args.cells, args.repeats)
+        rows.append(row)
+        print(f"{label:40s} wall {row['wall_s']:7.2f} s  solve {row['solve_s']:7.2f} s  steps {row['steps']}  "
+              f"max {row['max_overlap']:.4f}  p99 {row['p99_overlap']:.4f}  mean {row['mean_overlap']:.5f}  "
+              f"{row['error'][:80]}  ({time.perf_counter() - t0:.0f} s)", flush=True)
+
+    with open(HERE / "colony_benchmark.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    lines = [
+        f"Measured {stamp} on {platform.machine()} (2 cores shared with other jobs), Python {platform.python_version()}; "
+        f"2D colony grown from 1 cell to {args.cells} cells (seed 1, `qpcontact simulate` defaults otherwise); "
+        f"wall and solve times are medians of {args.repeats} repeats (the trajectories are deterministic, so the "
+        "overlaps are the same in every repeat).",
+        "",
+        "| configuration | steps | wall [s] | contact solve [s] | ms/step | largest overlap | 99th pct of per-step largest | mean overlap | note |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---|",
+    ]
+    for r in rows:
+        note = f"FAILED: {r['error']}" if r["error"] else ""
+        lines.append(f"| {r['config']} | {r['steps']} | {r['wall_s']:.1f} | {r['solve_s']:.1f} | {r['ms_per_step']:.1f} | "
+                     f"{r['max_overlap']:.4f} | {r['p99_overlap']:.4f} | {r['mean_overlap']:.5f} | {note} |")
+    (HERE / "colony_benchmark.md").write_text("\n".join(lines) + "\n")
+    plot(rows, HERE.parent / "img" / "colony_error_time.png", args.cells)
+
+
+def plot(rows: list[dict], path: Path, cells: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110)
+    for ax, key, name in ((axes[0], "max_overlap", "largest overlap over the run"),
+                          (axes[1], "mean_overlap", "mean overlap over the run")):
+        for r in rows:
+            marker = "x" if r["error"] else "o"
+            ax.loglog(r["wall_s"], max(r[key], 1e-6), marker, ms=7)
+            ax.annotate(r["config"], (r["wall_s"], max(r[key], 1e-6)), fontsize=7, xytext=(4, 2), textcoords="offset points")
+        ax.set_xlabel(f"wall time of the whole run to {cells} cells [s]")
+        ax.set_ylabel(f"{name} [fraction of diameter]")
+        ax.grid(True, which="both", alpha=0.3)
+    fig.suptitle("Error against run time over a whole 2D colony run (x = run failed)")
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,128 @@
+"""The timestep loop: kinematics of a step, the two dynamics, overlaps over time, failures."""
+
+import numpy as np
+import pytest
+
+import qpcontact as q
+from qpcontact.errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
+from qpcontact.growth import Colony, divide, grow
+from qpcontact.step import advance, rotate, step
+
+
+def rod_pair_end_to_end(gap=0.0):
+    """Two rods on the x-axis, tip to tip with the given gap, both growing."""
+    return q.Cells(centers=[[-1.5 - gap / 2, 0, 0], [1.5 + gap / 2, 0, 0]], axes=[1, 0, 0], lengths=2.0,
+                   radii=0.5, masses=1.0, growth_inertia=1000.0)
+
+
+def test_rotate_is_exact_and_keeps_unit_length():
+    v = np.array([[1.0, 0, 0], [0, 1.0, 0], [0.6, 0.8, 0]])
+    turned = rotate(v, np.array([[0, 0, np.pi / 2], [0, 0, 0], [np.pi, 0, 0]]))
+    np.testing.assert_allclose(turned, [[0, 1, 0], [0, 1, 0], [0.6, -0.8, 0]], atol=1e-15)
+    many = rotate(np.tile([[1.0, 0, 0]], (1000, 1)), np.random.default_rng(0).normal(0, 3, (1000, 3)))
+    np.testing.assert_allclose(np.linalg.norm(many, axis=1), 1.0, atol=1e-15)
+
+
+def test_advance_moves_turns_and_stretches():
+    cells = q.Cells(centers=[[0, 0, 0]], axes=[[1, 0, 0]], lengths=2.0, radii=0.5, masses=2.0,
+                    growth_inertia=4.0, momenta=[[2.0, 0, 0]], angular_momenta=[[0, 0, 0.3]], growth_momenta=[8.0])
+    dt = 0.1
+    moved = advance(cells, dt)
+    omega = cells.angular_velocities[0, 2]
+    np.testing.assert_allclose(moved.centers[0], [0.1, 0, 0], atol=1e-15)  # v = p/m = 1
+    np.testing.assert_allclose(moved.axes[0], [np.cos(omega * dt), np.sin(omega * dt), 0], atol=1e-15)
+    assert moved.lengths[0] == pytest.approx(2.0 + 2.0 * dt)  # l̇ = g/G = 2
+    with pytest.raises(InvalidArgumentError, match="too large"):
+        advance(cells.replace(growth_momenta=[-100.0]), dt)
+
+
+def test_overdamped_resets_momenta_and_inertial_keeps_them():
+    cells = q.Cells(centers=[[0, 0, 0]], axes=[[1, 0, 0]], lengths=2.0, radii=0.5, momenta=[[1.0, 0, 0]])
+    assert np.all(step(cells, 0.1).cells.centers == 0)  # overdamped, no drive: does not move
+    inertial = step(cells, 0.1, dynamics="inertial")
+    np.testing.assert_allclose(inertial.cells.centers[0], [0.1, 0, 0])
+    damped = step(cells, 0.1, dynamics="inertial", damping=2.0)
+    np.testing.assert_allclose(damped.cells.momenta[0], [np.exp(-0.2), 0, 0])
+    driven = step(cells, 0.1, drive=np.array([[0, 3.0, 0, 0, 0, 0, 0]]))
+    np.testing.assert_allclose(driven.cells.centers[0], [0, 0.3, 0])
+    with pytest.raises(InvalidArgumentError):
+        step(cells, 0.1, damping=1.0)  # damping means nothing when momenta are reset
+    with pytest.raises(InvalidArgumentError):
+        step(cells, 0.0)
+    with pytest.raises(InvalidArgumentError):
+        step(cells, 0.1, dynamics="brownian")
+
+
+def test_planar_mode_rejects_a_cell_out_of_the_plane():
+    cells = q.Cells(centers=[[0, 0, 0], [3, 0, 0.1]], axes=[1, 0, 0], lengths=2.0, radii=0.5)
+    with pytest.raises(InvalidCellsError, match="planar"):
+        step(cells, 0.1, planar=True)
+
+
+@pytest.mark.parametrize("solver", ["clarabel", "osqp"])
+def test_two_cells_growing_end_to_end_do_not_interpenetrate(solver):
+    colony = Colony.founder(rod_pair_end_to_end(), rates=np.log(2))
+    worst = 0.0
+    for _ in range(100):  # one doubling time; no division (threshold not reached)
+        colony, out = grow(colony, 0.01, planar=True, solver=solver, tolerance=1e-6, position_correction=0.5,
+                           margin=0.2)
+        worst = max(worst, out.max_overlap)
+    assert worst < 1e-3  # overlap bounded at 0.1 % of a diameter
+    # They grew (incompressible growth, G = 1000 m) and pushed each other apart symmetrically.
+    assert colony.cells.lengths == pytest.approx([4.0, 4.0], rel=1e-2)
+    assert colony.cells.centers[0, 0] == pytest.approx(-colony.cells.centers[1, 0], abs=1e-6)
+    tips_gap = np.diff(colony.cells.centers[:, 0])[0] - colony.cells.lengths.sum() / 2 - 1.0
+    assert tips_gap > -1e-3
+
+
+def test_position_correction_removes_an_overlap_that_velocity_constraints_keep():
+    overlapping = q.Cells(centers=[[0, 0, 0], [0, 0.8, 0]], axes=[1, 0, 0], lengths=2.0, radii=0.5)
+    without, with_ = overlapping, overlapping
+    for _ in range(20):
+        without = step(without, 0.05).cells
+        out = step(with_, 0.05, position_correction=0.5)
+        with_ = out.cells
+    gap_without = np.diff(without.centers[:, 1])[0] - 1.0
+    gap_with = np.diff(with_.centers[:, 1])[0] - 1.0
+    assert gap_without == pytest.approx(-0.2)  # at rest and overlapping: nothing approaches, nothing moves
+    assert -1e-4 < gap_with < 1e-3
+
+
+def test_total_linear_momentum_stays_zero_in_inertial_colony():
+    rng = np.random.default_rng(3)
+    n = 12
+    angles = rng.uniform(0, np.pi, n)
+    cells = q.Cells(centers=np.c_[rng.uniform(0, 6, (n, 2)), np.zeros(n)], axes=np.c_[np.cos(angles), np.sin(angles), np.zeros(n)],
+                    lengths=rng.uniform(1.0, 2.5, n), radii=0.5, masses=rng.uniform(0.5, 2.0, n), growth_inertia=5.0)
+    colony = Colony.founder(cells, rates=0.7)
+    scale = 0.0
+    for _ in range(60):
+        colony, out = grow(colony, 0.02, dynamics="inertial", planar=True, solver="osqp", tolerance=1e-8,
+                           position_correction=0.2, margin=0.2)
+        colony = divide(colony, 3.0, rng, planar=True)
+        scale = max(scale, np.abs(colony.cells.momenta).sum())
+        total = colony.cells.momenta.sum(axis=0)
+        assert np.linalg.norm(total) <= 1e-6 * scale
+    assert scale > 0.1  # the contacts did push cells about
+    assert colony.cells.n > n  # and cells divided
+
+
+def test_largest_overlap_stays_bounded_over_a_2d_run_with_position_correction():
+    from qpcontact.simulate import Settings, run_colony
+
+    run = run_colony(Settings(cells=150), progress=False)
+    assert not run.error
+    assert run.colony.cells.n >= 150
+    assert len(run.history["max_overlap"]) > 100
+    # Stated bound: 6 % of a diameter at every step (measured 3.9 % here; docs/colony.md).
+    assert max(run.history["max_overlap"]) < 0.06
+
+
+def test_a_failed_solve_is_raised_and_not_applied():
+    cells = q.Cells(centers=[[0, 0, 0], [0, 0.9, 0]], axes=[1, 0, 0], lengths=2.0, radii=0.5,
+                    momenta=[[0, 1.0, 0], [0, -1.0, 0]])
+    with pytest.raises(SolverFailedError) as info:
+        step(cells, 0.1, dynamics="inertial", solver="clarabel", solver_settings={"max_iter": 1})
+    assert not info.value.result.converged
+    # The unconverged impulses were not applied (and step returned no new state at all).
+    np.testing.assert_array_equal(info.value.result.cells.momenta, cells.momenta)
