@@ -66,6 +66,10 @@ def _tolerance_settings(backend: str, tol: float, time_limit: float | None, form
         s = {"eps_abs": tol, "eps_rel": tol}
         if backend == "piqp":
             s.update(max_iter=500, eps_duality_gap_abs=gap, eps_duality_gap_rel=gap)
+        if backend == "proxqp":
+            # ProxQP does not test the duality gap unless asked; without it, it stopped after 2–3
+            # iterations with gaps of 2e-4..1e-2 on most catalogue cases (docs/stability.md).
+            s.update(check_duality_gap=True, eps_duality_gap_abs=gap, eps_duality_gap_rel=gap)
     elif backend == "scs":
         s = {"eps_abs": tol, "eps_rel": tol, "max_iters": 200_000}
         if time_limit:
