@@ -4,7 +4,8 @@ Units: lengths in µm (cells of radius 0.5 µm dividing at a cylinder length of 
 mean doubling times (growth rate ln 2), masses in arbitrary units (mass = volume, growth inertia
 ``G`` = ``--growth-inertia`` × mass). Every step: :func:`qpcontact.growth.grow` (growth drive,
 contact solve, move), then :func:`qpcontact.growth.divide`; the step size follows the colony's
-expansion (:func:`qpcontact.growth.expansion_time_step`).
+expansion (:func:`qpcontact.growth.expansion_time_step`), and a step that turns some cell too
+fast is retried with half the step (:func:`grow_limiting_turns`).
 
 Outputs in ``--out`` (default ``colony-run``):
 
@@ -39,7 +40,7 @@ from .snapshots import load_colony, save_colony
 from .surfaces import substrate
 
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
-                  "step_seconds", "penetration", "complementarity")
+                  "step_seconds", "penetration", "complementarity", "rejected")
 
 
 @dataclass
@@ -67,6 +68,7 @@ class Settings:
     sink_speed: float = 0.5
     seed: int = 1
     max_steps: int = 100_000
+    max_halvings: int = 3
 
 
 @dataclass
@@ -88,6 +90,29 @@ def founder(settings: Settings) -> Colony:
     cell = Cells(centers=[[0.0, 0.0, z]], axes=[[1.0, 0.0, 0.0]], lengths=settings.division_length / 2,
                  radii=settings.radius, masses=volume, growth_inertia=settings.growth_inertia * volume)
     return Colony.founder(cell, settings.rate)
+
+
+def grow_limiting_turns(colony: Colony, dt: float, settings: Settings, **grow_options: Any) -> tuple[Colony, Any, float, int]:
+    """:func:`qpcontact.growth.grow` by ``dt``; if the contact solve turns some cell so fast that
+    its tips would move more than ``cfl`` diameters in the step (:func:`turning_reach`), the
+    step is rejected and retried with half the step, up to ``max_halvings`` times. The contact
+    constraints hold to first order in the step, and a fast-turning short cell (a newborn
+    squeezed between neighbours) is where the second-order error shows as overlap. Returns
+    ``(colony, step_result, dt_taken, rejected_attempts)``."""
+    limit = settings.cfl * 2.0 * float(np.median(colony.cells.radii))
+    for attempt in range(settings.max_halvings + 1):
+        grown, out = grow(colony, dt, **grow_options)
+        if attempt == settings.max_halvings or turning_reach(out.result.cells, dt) <= limit:
+            return grown, out, dt, attempt
+        dt /= 2.0
+    raise AssertionError("unreachable")
+
+
+def turning_reach(cells: Cells, dt: float) -> float:
+    """Largest distance a cell tip moves by the cell's turning alone in ``dt``:
+    ``max |ω| (l/2 + ρ) dt`` [length]."""
+    speed = np.linalg.norm(cells.angular_velocities, axis=1) * (cells.lengths / 2 + cells.radii)
+    return float(speed.max(initial=0.0)) * dt
 
 
 def run_colony(settings: Settings, *, start: Colony | None = None, progress: bool = True,
@@ -131,10 +156,11 @@ def run_colony(settings: Settings, *, start: Colony | None = None, progress: boo
             drive[:, 2] = -settings.sink_speed * np.where(np.isfinite(colony.cells.masses), colony.cells.masses, 0.0)
         t0 = time.perf_counter()
         try:
-            colony, out = grow(colony, dt, drive=drive, **options)
+            grown, out, dt, rejected = grow_limiting_turns(colony, dt, settings, drive=drive, **options)
         except SolverFailedError as exc:
             error = f"step {step} (t = {colony.time:.4g}, {colony.cells.n} cells): contact solve failed, not applied: {exc}"
             break
+        colony = grown
         colony = divide(colony, settings.division_length, rng, axis_noise=settings.axis_noise,
                         rate_noise=settings.rate_noise, base_rate=settings.rate, planar=planar)
         result = out.result
@@ -142,7 +168,7 @@ def run_colony(settings: Settings, *, start: Colony | None = None, progress: boo
                    max_overlap=out.max_overlap, mean_overlap=out.mean_overlap,
                    solve_seconds=result.times["setup"] + result.times["solve"], step_seconds=time.perf_counter() - t0,
                    penetration=result.errors.get("penetration", 0.0),
-                   complementarity=result.errors.get("complementarity", np.nan))
+                   complementarity=result.errors.get("complementarity", np.nan), rejected=rejected)
         for name in HISTORY_FIELDS:
             history[name].append(row[name])
         step += 1
@@ -197,6 +223,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--damping", type=float, default=d.damping, help="inertial only: damping rate [1/time]")
     p.add_argument("--sink-speed", type=float, default=d.sink_speed,
                    help="3D only: every cell is driven towards the substrate at this speed [µm/time]")
+    p.add_argument("--max-halvings", type=int, default=d.max_halvings,
+                   help="a step that turns a cell's tips by more than --cfl diameters is retried with half the step, "
+                        "at most this many times (0: never)")
     p.add_argument("--seed", type=int, default=d.seed, help="random seed (division noise)")
     p.add_argument("--max-steps", type=int, default=d.max_steps)
     p.add_argument("--start", type=Path, help="start from this snapshot (.npz) instead of one cell")
