@@ -126,3 +126,28 @@ def test_a_failed_solve_is_raised_and_not_applied():
     assert not info.value.result.converged
     # The unconverged impulses were not applied (and step returned no new state at all).
     np.testing.assert_array_equal(info.value.result.cells.momenta, cells.momenta)
+
+
+def test_contacts_that_do_not_collide_before_the_solve_must_still_be_in_the_system():
+    """model.md puts only colliding (approaching) contacts into the system. Over a step that is
+    not enough: A hits B, and B, touching C at rest (not approaching), is pushed into C unless
+    the B–C contact is in the system too (``keep_separating``)."""
+    from qpcontact.contacts import relative_normal_velocity
+
+    cells = q.Cells(centers=[[0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]], axes=[0, 1, 0], lengths=1.0, radii=0.5,
+                    momenta=[[1.0, 0, 0], [0, 0, 0], [0, 0, 0]])
+    contacts = q.find_contacts(cells, margin=0.01)
+    assert len(contacts) == 4  # A–B and B–C, two contacts each (parallel rods)
+
+    def post_velocities(keep):
+        r = q.resolve(cells, solver="clarabel", contacts=contacts, keep_separating=keep, tolerance=1e-8)
+        c = contacts
+        return relative_normal_velocity(r.cells, c.cell_a, c.cell_b, c.normal, c.offset_a, c.offset_b,
+                                        c.stretch_a, c.stretch_b)
+
+    only_colliding = post_velocities(False)
+    assert only_colliding[contacts.cell_a == 1].min() < -0.3  # B is driven into C
+    all_near = post_velocities(True)
+    assert all_near.min() > -1e-6  # nothing approaches any more
+    with pytest.raises(InvalidArgumentError, match="keep_separating"):
+        q.resolve(cells, solver="linear", contacts=contacts, keep_separating=True)
