@@ -6,15 +6,16 @@ cells by default) the benchmark times, with repeats (median, min, max):
 - *detect*: :func:`~qpcontact.contacts.find_contacts` + :func:`~qpcontact.contacts.colliding`;
 - *assemble*: :func:`~qpcontact.system.build_system`;
 - *solve*, per solver: the plain linear solve (the floor), the QP backends through
-  :func:`~qpcontact.resolve.solve_system` (setup + solve), and the field's baseline, conjugate
-  gradient on the normal equations from zero as in CellModeller (:func:`cg_normal_equations`);
+  :func:`~qpcontact.resolve.solve_system` (setup + solve), and the field's baselines from
+  :mod:`qpcontact.baselines`: ``cg`` (conjugate gradient on the normal equations from zero, as
+  in CellModeller) and ``bbpgd`` (projected gradient on the contact-space complementarity QP);
 - *check*: the error measures of :mod:`qpcontact.metrics` on one answer.
 
 Every answer is verified, untimed, against a high-accuracy reference: the QP answers against
 :func:`~qpcontact.validation.reference_solution` (relative error ``‖x − x*‖_W/‖x*‖_W``, target
 1e-6), the linear and CG answers against the linear solve at 1e-12. Each snapshot runs in its own
 subprocess, so its peak resident memory (``ru_maxrss``, taken after the timed phases and before
-the verification) is that of one step. The scaling exponent of detection + assembly is the slope
+the verification) is that of one step (with every solver). The scaling exponent of detection + assembly is the slope
 of a least-squares line through (log cells, log seconds).
 
 Output: a Markdown table and a log–log plot of time against cell count. The table is written
@@ -45,44 +46,24 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from . import metrics, scenes
+from .baselines import BASELINES, solve_baseline
 from .cells import Cells
 from .contacts import colliding, find_contacts
 from .linear import solve_min_norm
 from .resolve import solve_system
 from .system import ContactSystem, build_system
-from .validation import reference_solution
+from .validation import active_set_polish, reference_solution
 
 #: Solver specs ``name[/form]`` timed by default: the floor, the baseline, and the QP backends.
 DEFAULT_SOLVERS = ("linear", "cg", "osqp/primal", "osqp/contact", "clarabel/primal")
 #: The relative error every answer must reach (issue 6).
 TARGET_ERROR = 1e-6
+#: Solvers of the plain problem ``M x = b`` (checked against the linear solve, not the QP).
+PLAIN_SOLVERS = ("linear", "cg", "cg_euclidean")
 MARK_START, MARK_END = "<!-- bench:start -->", "<!-- bench:end -->"
 GENERATORS: dict[int, Callable[[int, int], Cells]] = {2: scenes.colony_2d, 3: scenes.colony_3d}
-
-
-# ------------------------------------------------------------------------------------------
-# The baseline: conjugate gradient on the normal equations (CellModeller)
-# ------------------------------------------------------------------------------------------
-def cg_normal_equations(system: ContactSystem, *, tol: float = TARGET_ERROR, max_iterations: int | None = None
-                        ) -> tuple[np.ndarray, int, bool]:
-    """CellModeller's solve: conjugate gradient on ``B̃ᵀB̃ ỹ = B̃ᵀb̃`` from zero, never forming
-    ``B̃ᵀB̃``. From zero the iterates stay in the row space, so CG converges to the
-    minimum-norm solution (in the scaled unknowns: minimum W-norm, the plain linear solve).
-
-    Returns ``(ỹ, iterations, converged)``; converged when ``‖B̃ᵀr‖ ≤ tol·‖B̃ᵀb̃‖``."""
-    B, rhs = system.matrix, system.rhs
-    n = B.shape[1]
-    normal = spla.LinearOperator((n, n), matvec=lambda v: B.T @ (B @ v), dtype=float)
-    count = [0]
-
-    def tick(_: np.ndarray) -> None:
-        count[0] += 1
-
-    y, info = spla.cg(normal, B.T @ rhs, rtol=tol, atol=0.0, maxiter=max_iterations or 10 * n, callback=tick)
-    return y, count[0], info == 0
 
 
 # ------------------------------------------------------------------------------------------
@@ -142,13 +123,19 @@ def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str
         "detect": _stats(t_detect), "assemble": _stats(t_assemble), "solvers": {},
     }
     answers: dict[str, np.ndarray | None] = {}
+    guesses: dict[str, np.ndarray] = {}  # contact impulses of the QP answers
     for spec in solvers:
         name, form, tol = _parse_solver(spec)
         tol = tol or tolerance
         row: dict[str, Any] = {"tolerance": tol}
-        if name == "cg":
-            (y, iterations, ok), times = _timed(lambda: cg_normal_equations(system, tol=tol), repeats)
-            row.update(converged=bool(ok), status="converged" if ok else "not converged", iterations=iterations)
+        if name in BASELINES:
+            def run(name: str = name, tol: float = tol):
+                return solve_baseline(system, name, tolerance=tol, time_limit=time_limit)
+            out, times = _timed(run, repeats)
+            y = out.y
+            if out.lam is not None:
+                guesses[spec] = out.lam
+            row.update(converged=out.converged, status=out.status, iterations=out.iterations)
         else:
             def call(name: str = name, form: str = form, tol: float = tol):
                 return solve_system(system, cells, solver=name, form=form, tolerance=tol, time_limit=time_limit)
@@ -156,6 +143,7 @@ def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str
             row.update(converged=bool(info["converged"]), status=str(info["status"]), iterations=info["iterations"],
                        form=info["form"], message=info["message"])
             if name != "linear" and y is not None and lam is not None:
+                guesses[spec] = lam
                 (_, t_check) = _timed(lambda: (metrics.penetration(system, y), metrics.complementarity_residual(system, y, lam),
                                                metrics.multiplier_consistency(system, y, lam),
                                                metrics.physics(cells, system, system.to_impulses(y), system.to_contact_impulses(lam))), 1)
@@ -168,15 +156,27 @@ def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str
     # Verification (untimed): the QPs against the complementarity reference, the linear solve and CG
     # against the linear solve at 1e-12.
     t0 = time.perf_counter()
-    linear_ref = solve_min_norm(system.matrix, system.rhs, tol=1e-12).y
-    qp_ref = reference_solution(system, "complementarity")
+    linear = solve_min_norm(system.matrix, system.rhs, tol=1e-12)
+    # The QP reference: the exact optimum on the active set of some solver's answer, kept only if
+    # it verifies the KKT conditions to 1e-12 (then it is the unique optimum, whatever solver
+    # guessed the set); otherwise validation.reference_solution's Clarabel solve at 1e-10.
+    qp_ref, record["reference_method"] = None, "clarabel 1e-10 + polish"
+    for spec, lam in guesses.items():
+        qp_ref = active_set_polish(system, lam)
+        if qp_ref is not None:
+            record["reference_method"] = f"exact KKT point on the active set of {spec}"
+            break
+    if qp_ref is None:
+        qp_ref = reference_solution(system, "complementarity")
+    linear_ref = linear.y
     record["reference_seconds"] = time.perf_counter() - t0
-    record["linear_inactive"] = int(np.sum(solve_min_norm(system.matrix, system.rhs, tol=1e-12).lam <= 0))
+    record["linear_inactive"] = int(np.sum(linear.lam <= 0))
     for spec, y in answers.items():
         name = _parse_solver(spec)[0]
-        ref = linear_ref if name in ("linear", "cg") else qp_ref
+        plain = name in PLAIN_SOLVERS
+        ref = linear_ref if plain else qp_ref
         row = record["solvers"][spec]
-        row["reference"] = "linear" if name in ("linear", "cg") else "complementarity"
+        row["reference"] = "linear" if plain else "complementarity"
         row["error"] = None if y is None else metrics.distance(y, ref)
         row["penetration"] = None if y is None else metrics.penetration(system, y)
         row["verified"] = bool(row["converged"] and row["error"] is not None and row["error"] <= TARGET_ERROR)
@@ -211,7 +211,7 @@ def machine_description() -> str:
 
 def best_qp(record: dict[str, Any]) -> tuple[str, dict[str, Any]] | None:
     """The fastest verified QP solver of a snapshot (median setup+solve)."""
-    rows = [(s, r) for s, r in record["solvers"].items() if _parse_solver(s)[0] not in ("linear", "cg") and r["verified"]]
+    rows = [(s, r) for s, r in record["solvers"].items() if _parse_solver(s)[0] not in PLAIN_SOLVERS and r["verified"]]
     return min(rows, key=lambda sr: sr[1]["solve"]["median"]) if rows else None
 
 
@@ -254,6 +254,8 @@ def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
             check = _fmt(s["check"]) if "check" in s else "–"
             lines.append(f"| {r['dim']}D | {r['cells']} | {spec} | {_fmt(s['solve'])} | {check} | {s.get('iterations')} | "
                          f"{s['status']} | {err} | {pen} | {'yes' if s['verified'] else '**no**'} |")
+    lines += ["", "QP references: " + "; ".join(f"{r['dim']}D {r['cells']}: {r['reference_method']} "
+                                             f"({r['reference_seconds']:.3g} s)" for r in records) + "."]
     lines += ["", "Fitted scaling exponent of detect + assemble (slope of log time against log cells):", ""]
     for dim in sorted({r["dim"] for r in records}):
         rs = [r for r in records if r["dim"] == dim]
@@ -331,7 +333,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--dims", type=int, nargs="+", default=[2, 3], choices=[2, 3])
     p.add_argument("--repeats", type=int, default=3, help="timed repeats of each phase (median, min, max)")
     p.add_argument("--solvers", nargs="+", default=list(DEFAULT_SOLVERS),
-                   help="linear, cg, or a qpsolvers backend with an optional /primal or /contact form")
+                   help="linear, a baseline (cg, cg_euclidean, bbpgd) or a qpsolvers backend with an optional /primal or "
+                        "/contact form; @TOL sets that solver's tolerance (e.g. clarabel/primal@1e-9)")
     p.add_argument("--tolerance", type=float, default=TARGET_ERROR, help="tolerance handed to the solvers")
     p.add_argument("--time-limit", type=float, default=120.0, help="seconds per QP solve, where the backend supports it")
     p.add_argument("--seed", type=int, default=0)

@@ -39,16 +39,6 @@ def test_quick_bench_writes_the_table_plot_and_data(tmp_path):
             assert row["verified"], (record["dim"], record["cells"], spec, row)
 
 
-def test_cg_baseline_converges_to_the_linear_solve():
-    cells = scenes.colony_2d(200, seed=3)
-    active, b = qc.colliding(qc.find_contacts(cells, planar=True))
-    system = qc.build_system(cells, active, b)
-    y, iterations, ok = bench.cg_normal_equations(system, tol=1e-10)
-    lin = qc.solve_system(system, cells, solver="linear")[0]
-    assert ok and iterations > 0
-    assert metrics.distance(y, lin) < 1e-7
-
-
 def test_scaling_exponent_of_a_power_law():
     n = [1e3, 1e4, 1e5]
     assert bench.scaling_exponent(n, [2e-6 * x**1.1 for x in n]) == pytest.approx(1.1)
