@@ -316,7 +316,18 @@ def run_one(prepared: Prepared, method: Method, tolerance: float, *, time_limit:
         row.update(repeats=0, setup_s=math.nan, solve_s=math.nan, total_s=elapsed if outcome == "timeout" else math.nan,
                    status=outcome, converged=False, iterations=None,
                    message=(f"killed after {hard_timeout:.0f} s" if outcome == "timeout" else str(payload))[:300])
-    errors = measure(prepared, method, tolerance, y, lam)
+    if y is not None and np.shape(y) != (n,) or lam is not None and np.shape(lam) != (k,):
+        row.update(converged=False, message=f"{method.solver} returned ỹ of shape {np.shape(y)}, λ̃ of shape "
+                   f"{None if lam is None else np.shape(lam)} for a system of shape {system.shape}; "
+                   f"status {row['status']}; {row['message']}"[:300])
+        outcome = "error" if outcome == "ok" else outcome
+        y = lam = None
+    try:
+        errors = measure(prepared, method, tolerance, y, lam)
+    except Exception as exc:  # a malformed answer is a failed run, recorded like the others
+        row.update(converged=False, message=f"measuring the answer failed: {type(exc).__name__}: {exc}"[:300])
+        outcome = "error" if outcome == "ok" else outcome
+        errors = measure(prepared, method, tolerance, None, None)
     accurate = bool(errors["distance"] <= max(ACCURACY_FACTOR * tolerance, ACCURACY_FLOOR))
     row.update(errors, accurate=accurate, success=bool(row["converged"] and accurate))
     if outcome == "ok":
