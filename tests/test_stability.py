@@ -158,3 +158,12 @@ def test_stability_command_writes_tables(tmp_path):
     assert {r["outcome"] for r in rows} == {"ok"}
     assert "nan" not in out.with_suffix(".csv").read_text().lower()
     assert "| parallel_0 |" in out.with_suffix(".md").read_text()
+
+
+def test_condition_estimate_is_reported_and_none_when_singular():
+    result, _ = _resolve("aspect_10000", solver="osqp", estimate_condition=True)
+    assert 1.0 <= result.condition_estimate < 1e3  # long thin rods stay well conditioned after scaling
+    near, _ = _resolve("near_duplicate", solver="linear", estimate_condition=True)
+    assert near.condition_estimate > 1e12  # two contacts 1e-8 length apart: nearly dependent rows
+    dup, _ = _resolve("duplicate_contacts", solver="linear", estimate_condition=True)
+    assert dup.converged and dup.condition_estimate is None  # singular Delassus operator: LSMR path
