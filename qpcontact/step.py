@@ -35,6 +35,7 @@ from .cells import Cells
 from .contacts import Contacts, concatenate, find_contacts, required_velocity_change
 from .errors import InvalidArgumentError, InvalidCellsError
 from .resolve import Result, resolve
+from .surfaces import plane_contacts
 
 DYNAMICS = ("overdamped", "inertial")
 #: Contacts separating faster than this many times the largest collision are left out
@@ -197,8 +198,6 @@ def step(
         SolverFailedError: the contact solve failed; nothing was applied.
         InvalidArgumentError: bad arguments, or a length would become negative.
     """
-    from .surfaces import plane_contacts  # surfaces imports this module's helpers
-
     if not (np.isfinite(dt) and dt > 0):
         raise InvalidArgumentError(f"dt: must be finite and > 0, got {dt!r}")
     if dynamics not in DYNAMICS:

@@ -1,12 +1,15 @@
 """Time per step and overlap for a 10,000-cell 2D colony, OSQP against Clarabel.
 
-Starts from a grown colony snapshot (``qpcontact simulate --cells 10000``), and from that same
-state takes --steps growth steps with each solver (``qpcontact simulate`` settings otherwise).
+Starts from a colony snapshot (``qpcontact simulate --cells N``; the newest snapshot in a folder
+when a folder is given) or from ``colony_2d:N``, the packed monolayer of
+:func:`qpcontact.scenes.colony_2d` (growth inertia and rates as ``qpcontact simulate``), and from
+that same state takes --steps growth steps with each solver (``qpcontact simulate`` settings
+otherwise).
 Records per step: cells, contacts in the system, unknowns, wall time of the step, contact-solve
 time (setup + solve), and the largest and mean overlap (fraction of the diameter) of the state
 the step starts from; and the overlaps of the final state. Medians over the steps.
 
-    flock /tmp/qpcontact-bench.lock python docs/data/colony_10k.py SNAPSHOT.npz
+    flock /tmp/qpcontact-bench.lock python docs/data/colony_10k.py colony_2d:10000 SNAPSHOT.npz
 """
 
 from __future__ import annotations
@@ -19,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from qpcontact.contacts import find_contacts
-from qpcontact.growth import divide, expansion_time_step, grow
+from qpcontact.growth import Colony, divide, expansion_time_step, grow
+from qpcontact.scenes import colony_2d
 from qpcontact.simulate import Settings
 from qpcontact.snapshots import load_colony
 from qpcontact.step import overlap_fractions
@@ -30,24 +34,46 @@ CONFIGS = [("osqp", 1e-3), ("osqp", 1e-4), ("clarabel", 1e-6)]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("snapshot", type=Path)
+    parser.add_argument("starts", nargs="+", help="snapshot .npz, folder of snapshots, or colony_2d:N")
     parser.add_argument("--steps", type=int, default=5)
+    parser.add_argument("--out", type=Path, default=HERE / "colony_10k.md")
     args = parser.parse_args()
-    start, _ = load_colony(args.snapshot)
     s = Settings()
     lines = [
         f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {platform.machine()} (2 cores shared with "
-        f"other jobs); {args.steps} steps from the same {start.cells.n}-cell 2D colony grown by `qpcontact simulate` "
-        f"(t = {start.time:.3f} doubling times); medians over the steps.",
+        f"other jobs); {args.steps} growth steps with each solver from the same start; medians over the steps.",
         "",
-        "| solver | tolerance | contacts in system | unknowns | dt | step wall [s] | contact solve [s] | largest overlap (per step, max) | mean overlap | largest overlap after the steps | note |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
+        "| start | solver | tolerance | contacts in system | unknowns | dt | step wall [s] | contact solve [s] | largest overlap (per step, max) | mean overlap | largest overlap after the steps | note |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|",
     ]
+    for spec in args.starts:
+        start, label = load_start(spec, s)
+        lines += measure(start, label, s, args.steps)
+    args.out.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+def load_start(spec: str, s: Settings) -> tuple[Colony, str]:
+    """The starting colony and a label for the table."""
+    if spec.startswith("colony_2d:"):
+        n = int(spec.split(":")[1])
+        cells = colony_2d(n, seed=0, growth_inertia=s.growth_inertia)
+        rates = s.rate * (1.0 + s.rate_noise * np.random.default_rng(0).standard_normal(n))
+        return Colony.founder(cells, np.maximum(rates, 0.0)), f"scenes.colony_2d({n}) packed layer"
+    path = Path(spec)
+    if path.is_dir():
+        path = sorted(path.glob("step_*.npz"))[-1]
+    colony, step = load_colony(path)
+    return colony, f"grown by `qpcontact simulate` to {colony.cells.n} cells (t = {colony.time:.2f})"
+
+
+def measure(start: Colony, label: str, s: Settings, steps: int) -> list[str]:
+    lines = []
     for solver, tolerance in CONFIGS:
         colony = start
         rng = np.random.default_rng(0)
         rows, error = [], ""
-        for _ in range(args.steps):
+        for _ in range(steps):
             dt = expansion_time_step(colony, max_dt=s.max_dt, cfl=s.cfl)
             t0 = time.perf_counter()
             try:
@@ -67,12 +93,11 @@ def main() -> None:
         if rows:
             a = np.array(rows)
             med = np.median(a, axis=0)
-            lines.append(f"| {solver} | {tolerance:g} | {med[0]:.0f} | {med[1]:.0f} | {med[2]:.4f} | {med[3]:.2f} | "
+            lines.append(f"| {label} | {solver} | {tolerance:g} | {med[0]:.0f} | {med[1]:.0f} | {med[2]:.4f} | {med[3]:.2f} | "
                          f"{med[4]:.2f} | {a[:, 5].max():.4f} | {med[6]:.5f} | {final.max(initial=0.0):.4f} | {error} |")
         else:
-            lines.append(f"| {solver} | {tolerance:g} | | | | | | | | | {error} |")
-    (HERE / "colony_10k.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+            lines.append(f"| {label} | {solver} | {tolerance:g} | | | | | | | | | {error} |")
+    return lines
 
 
 if __name__ == "__main__":
