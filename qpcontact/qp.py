@@ -144,13 +144,15 @@ def _problem(matrix: sp.spmatrix, rhs: np.ndarray, formulation: str, form: str, 
     if formulation == "complementarity" and form == "primal":
         return qpsolvers.Problem(P=sp.identity(n, format="csc"), q=np.zeros(n), G=-B, h=-rhs)
     if formulation == "complementarity" and form == "contact":
-        return qpsolvers.Problem(P=(B @ B.T).tocsc(), q=-rhs, lb=np.zeros(k), ub=np.full(k, np.inf))
+        # Sorted indices: PIQP misreads a CSC matrix with unsorted indices (what a sparse product
+        # returns) and reported "dual infeasible" on 29 of 41 stability cases (docs/stability.md).
+        return qpsolvers.Problem(P=(B @ B.T).tocsc().sorted_indices(), q=-rhs, lb=np.zeros(k), ub=np.full(k, np.inf))
     if formulation == "least_squares":
         if form == "primal":
             top, width = regularization * sp.identity(n, format="csc"), n
             eq = sp.hstack([B, -sp.identity(k)], format="csc")
         else:
-            a = (B @ B.T).tocsc()
+            a = (B @ B.T).tocsc().sorted_indices()
             top, width = regularization * a, k
             eq = sp.hstack([a, -sp.identity(k)], format="csc")
         P = sp.block_diag([top, sp.identity(k)], format="csc")

@@ -167,3 +167,11 @@ def test_condition_estimate_is_reported_and_none_when_singular():
     assert near.condition_estimate > 1e12  # two contacts 1e-8 length apart: nearly dependent rows
     dup, _ = _resolve("duplicate_contacts", solver="linear", estimate_condition=True)
     assert dup.converged and dup.condition_estimate is None  # singular Delassus operator: LSMR path
+
+
+def test_piqp_contact_form_solves_small_cases():
+    """Regression: the contact-form Delassus matrix had unsorted CSC indices, which PIQP misreads
+    (it reported PIQP_DUAL_INFEASIBLE on a 2 × 2 positive definite bound-constrained QP)."""
+    for name in ("parallel_0", "aspect_1", "mass_ratio_1e-08"):
+        result, _ = _resolve(name, solver="piqp", formulation="complementarity", form="contact")
+        assert result.converged and result.errors["penetration"] <= KKT_LIMIT
