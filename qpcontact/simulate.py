@@ -34,7 +34,7 @@ import numpy as np
 from tqdm import tqdm
 
 from .cells import Cells
-from .errors import QPContactError, SolverFailedError
+from .errors import InvalidArgumentError, QPContactError, SolverFailedError
 from .growth import Colony, divide, expansion_time_step, grow
 from .snapshots import load_colony, save_colony
 from .surfaces import substrate
@@ -129,8 +129,9 @@ def run_colony(settings: Settings, *, start: Colony | None = None, progress: boo
             factor since the last frame (0: no frames).
 
     Returns:
-        A :class:`Run`. A failed contact solve ends the run early with ``error`` set (the
-        failed step is not applied).
+        A :class:`Run`. A failed contact solve, or a step that cannot be taken (a cell
+        compressed to a negative length), ends the run early with ``error`` set (that step is
+        not applied).
     """
     rng = np.random.default_rng(settings.seed)
     colony = founder(settings) if start is None else start
@@ -159,6 +160,9 @@ def run_colony(settings: Settings, *, start: Colony | None = None, progress: boo
             grown, out, dt, rejected = grow_limiting_turns(colony, dt, settings, drive=drive, **options)
         except SolverFailedError as exc:
             error = f"step {step} (t = {colony.time:.4g}, {colony.cells.n} cells): contact solve failed, not applied: {exc}"
+            break
+        except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
+            error = f"step {step} (t = {colony.time:.4g}, {colony.cells.n} cells): step not applied: {exc}"
             break
         colony = grown
         colony = divide(colony, settings.division_length, rng, axis_noise=settings.axis_noise,
