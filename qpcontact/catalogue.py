@@ -400,10 +400,10 @@ def _catalogue() -> dict[str, Case]:
     add(Case("units_um_pg_s", "units", "the same 25 rods in µm, pg, s", random_cluster))
     add(Case("hub_1000", "hub", "a big sphere touched by 1000 radial rods", hub, large=True))
     add(Case("chain_10000", "chain", "10⁴ growing rods end to end", long_chain, large=True))
-    add(Case("jammed_disks", "jammed", "144 disks in a hexagonal packing (planar), ~3 contacts per 2 unknowns",
+    add(Case("jammed_disks", "jammed", "144 disks in a hexagonal packing (planar): 381 contacts, 288 unknowns",
              hexagonal_disks, options=JAMMED_OPTIONS))
-    add(Case("jammed_fcc", "jammed", "63 spheres in an fcc packing, up to 6 contacts per 3 unknowns", fcc_spheres, options=JAMMED_OPTIONS))
-    add(Case("jammed_rod_bundle", "jammed", "36 parallel rods in a hexagonal bundle, ~6 contacts per 5 unknowns",
+    add(Case("jammed_fcc", "jammed", "63 spheres in an fcc packing: 240 contacts, 189 unknowns", fcc_spheres, options=JAMMED_OPTIONS))
+    add(Case("jammed_rod_bundle", "jammed", "36 parallel rods in a hexagonal bundle: 170 contacts, 180 unknowns, rank-deficient",
              rod_bundle, options=JAMMED_OPTIONS))
     add(Case("duplicate_contacts", "duplicate", "a 25-rod heap with every contact listed twice",
              random_cluster, contacts=duplicated_contacts))
