@@ -57,7 +57,7 @@ from .system import ContactSystem, build_system
 from .validation import active_set_polish, reference_solution
 
 #: Solver specs ``name[/form]`` timed by default: the floor, the baseline, and the QP backends.
-DEFAULT_SOLVERS = ("linear", "cg", "osqp/primal", "osqp/contact", "clarabel/primal")
+DEFAULT_SOLVERS = ("linear", "linear/lsmr", "cg@1e-8", "osqp/contact", "osqp/primal", "clarabel/primal@1e-9")
 #: The relative error every answer must reach (issue 6).
 TARGET_ERROR = 1e-6
 #: Solvers of the plain problem ``M x = b`` (checked against the linear solve, not the QP).
@@ -87,17 +87,23 @@ def load_scene(dim: int, n: int, seed: int, cache_dir: Path | None) -> Cells:
 # ------------------------------------------------------------------------------------------
 # One snapshot (runs in a subprocess)
 # ------------------------------------------------------------------------------------------
+#: A phase is not repeated once its repeats so far took longer than this [s] (keeps a full run short).
+REPEAT_BUDGET = 30.0
+
+
 def _timed(fn: Callable[[], Any], repeats: int) -> tuple[Any, list[float]]:
     times, out = [], None
     for _ in range(repeats):
         t0 = time.perf_counter()
         out = fn()
         times.append(time.perf_counter() - t0)
+        if sum(times) > REPEAT_BUDGET:
+            break
     return out, times
 
 
 def _stats(times: list[float]) -> dict[str, float]:
-    return {"median": float(np.median(times)), "min": float(min(times)), "max": float(max(times))}
+    return {"median": float(np.median(times)), "min": float(min(times)), "max": float(max(times)), "repeats": len(times)}
 
 
 def _parse_solver(spec: str) -> tuple[str, str, float | None]:
@@ -136,6 +142,12 @@ def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str
             if out.lam is not None:
                 guesses[spec] = out.lam
             row.update(converged=out.converged, status=out.status, iterations=out.iterations)
+        elif name == "linear" and form == "lsmr":  # the iterative floor: LSMR to the same check
+            def lsmr(tol: float = tol):
+                return solve_min_norm(system.matrix, system.rhs, method="lsmr", tol=max(min(tol, 1e-6) * 1e-2, 1e-12))
+            lin, times = _timed(lsmr, repeats)
+            y = lin.y
+            row.update(converged=True, status="solved (lsmr)", iterations=lin.iterations)
         else:
             def call(name: str = name, form: str = form, tol: float = tol):
                 return solve_system(system, cells, solver=name, form=form, tolerance=tol, time_limit=time_limit)
@@ -222,12 +234,13 @@ def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         f"{meta['repeats']} repeats. Error: relative W-norm distance to the reference; verified = converged and "
         f"error ≤ {TARGET_ERROR:g}.", "",
         "| scene | cells | contacts | unknowns | detect | assemble | best QP (verified) | step = detect+assemble+QP | "
-        "linear floor | QP / linear | (detect+assemble) / step | peak RSS MiB |",
+        "linear floor (LU or LSMR) | QP / linear | (detect+assemble) / step | peak RSS MiB |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in records:
         best = best_qp(r)
-        lin = r["solvers"].get("linear")
+        floors = [row for spec, row in r["solvers"].items() if _parse_solver(spec)[0] == "linear" and row["verified"]]
+        lin = min(floors, key=lambda row: row["solve"]["median"]) if floors else None
         da = r["detect"]["median"] + r["assemble"]["median"]
         if best:
             step = da + best[1]["solve"]["median"]
@@ -254,6 +267,9 @@ def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
             check = _fmt(s["check"]) if "check" in s else "–"
             lines.append(f"| {r['dim']}D | {r['cells']} | {spec} | {_fmt(s['solve'])} | {check} | {s.get('iterations')} | "
                          f"{s['status']} | {err} | {pen} | {'yes' if s['verified'] else '**no**'} |")
+    skipped = [f"{r['dim']}D {r['cells']}: {spec} ({why})" for r in records for spec, why in r.get("skipped", {}).items()]
+    if skipped:
+        lines += ["", "Not run (too slow, see `--slow-limit`): " + "; ".join(skipped) + "."]
     lines += ["", "QP references: " + "; ".join(f"{r['dim']}D {r['cells']}: {r['reference_method']} "
                                              f"({r['reference_seconds']:.3g} s)" for r in records) + "."]
     lines += ["", "Fitted scaling exponent of detect + assemble (slope of log time against log cells):", ""]
@@ -279,8 +295,9 @@ def plot(records: list[dict[str, Any]], path: Path) -> None:
         n = [r["cells"] for r in rs]
         ax.loglog(n, [r["detect"]["median"] for r in rs], "k--o", label="detect")
         ax.loglog(n, [r["assemble"]["median"] for r in rs], "k:s", label="assemble")
-        for spec in rs[0]["solvers"]:
-            ax.loglog(n, [r["solvers"][spec]["solve"]["median"] for r in rs], "-o", label=spec)
+        for spec in dict.fromkeys(spec for r in rs for spec in r["solvers"]):
+            done = [(r["cells"], r["solvers"][spec]["solve"]["median"]) for r in rs if spec in r["solvers"]]
+            ax.loglog(*zip(*done), "-o", label=spec)
         ax.loglog(n, [n_i * 1e-5 for n_i in n], color="0.8", lw=4, zorder=0, label="∝ cells")
         ax.set(xlabel="cells", ylabel="seconds (median)", title=f"{dim}D colony")
         ax.grid(True, which="both", alpha=0.3)
@@ -327,6 +344,30 @@ def profile_step(dim: int, n: int, seed: int, solver: str, tolerance: float, cac
 # ------------------------------------------------------------------------------------------
 # Command line
 # ------------------------------------------------------------------------------------------
+#: Exponent used to extrapolate a solve time to the next size (sparse factorizations of 3D
+#: contact graphs grow about this fast; see docs/performance.md).
+EXTRAPOLATION_EXPONENT = 2.0
+
+
+def _too_slow(previous: dict[str, Any] | None, n: int, solvers: list[str], limit: float) -> dict[str, str]:
+    """Solvers not to run at ``n`` cells: those skipped before, or whose time at the previous size,
+    extrapolated with :data:`EXTRAPOLATION_EXPONENT`, exceeds ``limit`` seconds."""
+    if previous is None:
+        return {}
+    out = {}
+    for spec in solvers:
+        if spec in previous.get("skipped", {}):
+            out[spec] = previous["skipped"][spec]
+            continue
+        row = previous["solvers"].get(spec)
+        if row is None:
+            continue
+        guess = row["solve"]["median"] * (n / previous["cells"]) ** EXTRAPOLATION_EXPONENT
+        if guess > limit:
+            out[spec] = f"{row['solve']['median']:.3g} s at {previous['cells']} cells, extrapolated {guess:.3g} s > {limit:g} s"
+    return out
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="qpcontact bench", description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="cell counts")
@@ -337,6 +378,8 @@ def _parser() -> argparse.ArgumentParser:
                         "/contact form; @TOL sets that solver's tolerance (e.g. clarabel/primal@1e-9)")
     p.add_argument("--tolerance", type=float, default=TARGET_ERROR, help="tolerance handed to the solvers")
     p.add_argument("--time-limit", type=float, default=120.0, help="seconds per QP solve, where the backend supports it")
+    p.add_argument("--slow-limit", type=float, default=120.0,
+                   help="skip a solver at the next size when its time extrapolated (exponent 2) exceeds this [s]")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quick", action="store_true", help="tiny sizes (300, 1000), 2 repeats: a smoke test in seconds")
     p.add_argument("--out-dir", type=Path, default=Path("docs"),
@@ -363,18 +406,23 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     records = []
     common = ["--repeats", str(args.repeats), "--seed", str(args.seed), "--tolerance", repr(args.tolerance),
-              "--time-limit", repr(args.time_limit), "--cache-dir", str(args.cache_dir), "--solvers", *args.solvers]
+              "--time-limit", repr(args.time_limit), "--cache-dir", str(args.cache_dir)]
     for dim in args.dims:
+        previous: dict[str, Any] | None = None
         for n in sorted(args.sizes):
             print(f"bench: {dim}D, {n} cells ...", file=sys.stderr, flush=True)
             t0 = time.perf_counter()
-            proc = subprocess.run([sys.executable, "-m", "qpcontact.bench", "--worker", str(dim), str(n), *common],
-                                  capture_output=True, text=True)
+            skipped = _too_slow(previous, n, args.solvers, args.slow_limit)
+            run = [spec for spec in args.solvers if spec not in skipped]
+            proc = subprocess.run([sys.executable, "-m", "qpcontact.bench", "--worker", str(dim), str(n), *common,
+                                   "--solvers", *run], capture_output=True, text=True)
             if proc.returncode != 0:
                 print(proc.stderr, file=sys.stderr)
                 print(f"bench: worker for {dim}D, {n} cells failed (exit {proc.returncode})", file=sys.stderr)
                 return 1
-            records.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+            previous = json.loads(proc.stdout.strip().splitlines()[-1])
+            previous["skipped"] = skipped
+            records.append(previous)
             print(f"bench: {dim}D, {n} cells done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
