@@ -227,6 +227,53 @@ def best_qp(record: dict[str, Any]) -> tuple[str, dict[str, Any]] | None:
     return min(rows, key=lambda sr: sr[1]["solve"]["median"]) if rows else None
 
 
+def _step(record: dict[str, Any]) -> tuple[float | None, float | None, float]:
+    """(step seconds with the best verified QP, QP/linear ratio, detect+assemble seconds)."""
+    da = record["detect"]["median"] + record["assemble"]["median"]
+    best = best_qp(record)
+    floors = [row["solve"]["median"] for spec, row in record["solvers"].items()
+              if _parse_solver(spec)[0] == "linear" and row["verified"]]
+    if best is None:
+        return None, None, da
+    qp = best[1]["solve"]["median"]
+    return da + qp, (qp / min(floors) if floors else None), da
+
+
+def target_lines(records: list[dict[str, Any]]) -> list[str]:
+    """Each target of issue 6 against this run: met, missed, or not measured."""
+    def find(dim: int, n: int) -> dict[str, Any] | None:
+        return next((r for r in records if r["dim"] == dim and r["cells"] == n), None)
+
+    def verdict(ok: bool | None) -> str:
+        return "not measured" if ok is None else ("**met**" if ok else "**missed**")
+
+    lines = ["| target | measured | verdict |", "|---|---|---|"]
+    for dim, n, limit in ((2, 100000, 5.0), (2, 10000, 0.5), (3, 100000, 20.0)):
+        r = find(dim, n)
+        step = _step(r)[0] if r else None
+        text = "–" if r is None else ("no verified QP answer" if step is None else f"{step:.3g} s")
+        lines.append(f"| {dim}D, {n} cells: full step ≤ {limit:g} s | {text} | "
+                     f"{verdict(None if r is None else (step is not None and step <= limit))} |")
+    for dim in (2, 3):
+        r = find(dim, 100000)
+        if r is None:
+            continue
+        step, ratio, da = _step(r)
+        lines.append(f"| {dim}D, 10⁵ cells: QP ≤ 3× linear solve | "
+                     + ("–" if ratio is None else f"{ratio:.2f}×") + f" | {verdict(None if ratio is None else ratio <= 3)} |")
+        lines.append(f"| {dim}D, 10⁵ cells: detect + assemble < 20 % of the step | "
+                     + ("–" if step is None else f"{100 * da / step:.0f} % ({da:.3g} s)")
+                     + f" | {verdict(None if step is None else da < 0.2 * step)} |")
+        lines.append(f"| {dim}D, 10⁵ cells: peak memory < 4 GiB | {r['peak_rss_mib'] / 1024:.2f} GiB | "
+                     f"{verdict(r['peak_rss_mib'] < 4096)} |")
+    for dim in sorted({r["dim"] for r in records}):
+        rs = [r for r in records if r["dim"] == dim]
+        exp = scaling_exponent([r["cells"] for r in rs], [r["detect"]["median"] + r["assemble"]["median"] for r in rs])
+        lines.append(f"| {dim}D: detect + assemble exponent ≤ 1.15 ({rs[0]['cells']}–{rs[-1]['cells']} cells) | "
+                     + ("–" if exp is None else f"{exp:.2f}") + f" | {verdict(None if exp is None else exp <= 1.15)} |")
+    return lines
+
+
 def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     """The results as Markdown: a phase table, a per-solver table, and the scaling exponents."""
     lines = [
@@ -257,6 +304,8 @@ def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
             f"| {r['dim']}D | {r['cells']} | {r['contacts']} | {r['unknowns']} | {_fmt(r['detect'])} | {_fmt(r['assemble'])} | "
             f"{qp} | {step_s} | – | – | {share} | {r['peak_rss_mib']:.0f} |"
         )
+    lines += ["", "Targets of issue 6 in this run (step = detect + assemble + the fastest verified QP solve):", "",
+              *target_lines(records)]
     lines += ["", "Per solver (solve = setup + solve through `solve_system`; check = the error measures on that answer):", "",
               "| scene | cells | solver | solve | check | iterations | status | error | penetration | verified |",
               "|---|---|---|---|---|---|---|---|---|---|"]
