@@ -111,8 +111,10 @@ def candidate_pairs(cells: Cells, margin: float = 0.0) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.intp)
     lengths, radii = cells.lengths, cells.radii
     # Cover each rod by k_i pieces of length <= h; a piece's bounding radius is half its
-    # length plus the cell radius.
-    h = max(float(np.median(lengths)), float(np.median(2.0 * radii)))
+    # length plus the cell radius. h = half the median length: tighter spheres than one per
+    # median rod, so fewer candidate pairs reach the narrow phase (3D colony of 10⁵ cells:
+    # 1.8M → 1.1M candidates, detection 2.2× faster; 2D unchanged; docs/performance.md).
+    h = max(0.5 * float(np.median(lengths)), float(np.median(2.0 * radii)))
     pieces = np.maximum(1, np.ceil(lengths / h)).astype(np.intp)
     owner = np.repeat(np.arange(n), pieces)
     first = np.cumsum(pieces) - pieces
