@@ -134,7 +134,9 @@ def candidate_pairs(cells: Cells, margin: float = 0.0) -> np.ndarray:
     # Rods of several pieces give repeated pairs. One int64 key per pair, sorted, duplicates
     # dropped: the same sorted (i, j) list as np.unique(axis=0), many times faster.
     key = np.sort(cp[:, 0].astype(np.int64) * n + cp[:, 1])
-    key = key[np.concatenate([[True], key[1:] != key[:-1]])]
+    first = np.ones(key.size, dtype=bool)
+    first[1:] = key[1:] != key[:-1]
+    key = key[first]
     cp = np.column_stack([key // n, key % n]).astype(np.intp)
     both_fixed = np.isinf(cells.masses[cp[:, 0]]) & np.isinf(cells.masses[cp[:, 1]])
     return cp[~both_fixed]

@@ -64,6 +64,12 @@ def test_broad_phase_keeps_the_sorted_unique_pairs(seed):
     assert np.allclose(found.normal, touching.normal, rtol=0, atol=1e-12)
 
 
+def test_broad_phase_of_cells_whose_only_close_pieces_are_their_own():
+    """One long rod alone: its pieces are within reach of each other but no pair remains."""
+    cells = qc.Cells([[0.0, 0.0, 0.0], [50.0, 0.0, 0.0], [0.0, 50.0, 0.0]], [1.0, 0.0, 0.0], [9.0, 1.0, 1.0], 0.5)
+    assert candidate_pairs(cells).shape == (0, 2)
+
+
 def test_narrow_phase_order_does_not_depend_on_the_pair_order():
     cells = scenes.colony_2d(300, seed=1)
     pairs = candidate_pairs(cells)
