@@ -246,9 +246,9 @@ def solve_qp_system(
         out = _solve_block(sub, rhs[rows], solver, formulation, form, regularization, options)
         setup, solve = setup + out.setup_seconds, solve + out.solve_seconds
         if out.y is None or not out.found:
-            out.setup_seconds, out.solve_seconds = setup, solve
-            out.status = f"{out.status} (block of {rows.size} contacts)"
-            return out
+            # The block's answer covers only its own rows and columns: report the failure, no partial ỹ.
+            return QPOutcome(None, None, False, f"{out.status} (block of {rows.size} contacts)", out.iterations,
+                             setup, solve, error=out.error)
         y[cols] = out.y
         if out.lam is None:
             has_lam = False

@@ -119,3 +119,27 @@ def test_baseline_arguments_are_checked(colony):
         conjugate_gradient(system, metric="L1")
     with pytest.raises(InvalidArgumentError, match="unknown baseline"):
         solve_baseline(system, "pgs", tolerance=1e-6)
+
+
+def test_a_failed_block_gives_no_partial_answer(monkeypatch):
+    """qp.solve_qp_system splits independent components into blocks; when one block fails, the
+    outcome must carry no ỹ (a block's ỹ has only its own columns: resolve crashed on it)."""
+    from qpcontact import qp, resolve
+
+    cells = scenes.colony_2d(400, seed=1)
+    real = qp._solve_block
+    calls = []
+
+    def second_block_fails(B, rhs, *args, **kwargs):
+        out = real(B, rhs, *args, **kwargs)
+        calls.append(B.shape)
+        if len(calls) == 2:
+            out.found, out.status = False, "made to fail"
+        return out
+
+    monkeypatch.setattr(qp, "BLOCK_ROWS", 50)
+    monkeypatch.setattr(qp, "_solve_block", second_block_fails)
+    result = resolve(cells, solver="osqp", on_failure="return")
+    assert len(calls) == 2 and not result.converged
+    assert "made to fail" in result.status and result.scaled_solution is None
+    np.testing.assert_array_equal(result.cells.momenta, cells.momenta)
