@@ -453,7 +453,7 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     panel_rows = [("complementarity", ("complementarity",)), ("least_squares and linear", ("least_squares", "linear"))]
     fig, axes = plt.subplots(len(panel_rows), len(families), figsize=(5.2 * len(families), 4.4 * len(panel_rows)),
                              squeeze=False, sharex=True, sharey=True)
-    floor = 1e-13
+    floor, ceiling = 1e-13, 10.0  # errors beyond are drawn at the edge (the CSV has the values)
     handles = {}
     for i, (title, formulations) in enumerate(panel_rows):
         for j, family in enumerate(families):
@@ -462,7 +462,7 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
             for (scene, label) in dict.fromkeys((r["scene"], r["method"]) for r in mine):
                 sweep = sorted((r for r in mine if r["scene"] == scene and r["method"] == label),
                                key=lambda r: -r["tolerance"])
-                pts = [(r["total_s"], max(r["distance"], floor), r["success"]) for r in sweep
+                pts = [(r["total_s"], min(max(r["distance"], floor), ceiling), r["success"]) for r in sweep
                        if np.isfinite(r["total_s"]) and np.isfinite(r["distance"]) and r["outcome"] != "time_limit"]
                 if not pts:
                     continue
@@ -475,6 +475,7 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
                 handles[solver] = plt.Line2D([], [], color=color, marker=marker, ls="")
             ax.set_xscale("log")
             ax.set_yscale("log")
+            ax.set_ylim(floor / 3, ceiling * 3)
             ax.grid(True, which="major", alpha=0.3)
             ax.set_title(f"{family}: {title}", fontsize=10)
             if i == len(panel_rows) - 1:
@@ -563,6 +564,22 @@ def warm_up(methods: list[Method]) -> None:
             pass
 
 
+def read_csv(path: Path) -> list[dict[str, Any]]:
+    """Rows of a CSV written by :func:`write_csv`, with numbers and flags parsed back."""
+    numeric = {"tolerance", "setup_s", "solve_s", "total_s", "penetration", "complementarity", "duality_gap",
+               "distance", "objective_gap", "distance_complementarity", "distance_linear", "momentum_change",
+               "angular_momentum_change", "energy_change_relative"}
+    flags = {"planar", "all_active", "converged", "accurate", "success"}
+    with path.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for row in rows:
+        for key in numeric:
+            row[key] = float(row[key]) if row[key] not in ("", "None") else math.nan
+        for key in flags:
+            row[key] = row[key] == "True"
+    return rows
+
+
 def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
     with path.open("w", newline="") as fh:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS)
@@ -584,7 +601,14 @@ def main(argv: list[str] | None = None) -> int:
                              "1.5× this plus a few seconds (default 5)")
     parser.add_argument("--out", type=Path, default=Path("compare-out"), help="output folder (default ./compare-out)")
     parser.add_argument("--quick", action="store_true", help="a small set (five small scenes, tolerances 1e-3, 1e-6, one repeat)")
+    parser.add_argument("--replot", type=Path, metavar="CSV",
+                        help="only redraw solvers.png in --out from a CSV of an earlier run (no solving)")
     args = parser.parse_args(argv)
+    if args.replot:
+        args.out.mkdir(parents=True, exist_ok=True)
+        plot(read_csv(args.replot), args.out / "solvers.png")
+        print(f"wrote {args.out / 'solvers.png'}")
+        return 0
     from tqdm import tqdm
 
     tolerances = [float(t) for t in args.tolerances.split(",")] if args.tolerances else (

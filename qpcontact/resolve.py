@@ -18,7 +18,7 @@ from .qp import FORMS, FORMULATIONS, check_solver, solve_qp_system
 from .system import ContactSystem, build_system
 
 #: Default form per formulation (see qpcontact.qp; chosen from docs/solvers.md measurements).
-DEFAULT_FORM = {"complementarity": "primal", "least_squares": "primal"}
+DEFAULT_FORM = {"complementarity": "contact", "least_squares": "primal"}
 #: A QP answer is accepted when its penetration (and, for complementarity, its relative duality
 #: gap) is at most this many times the tolerance.
 ACCEPT_FACTOR = 100.0
@@ -100,7 +100,7 @@ def solve_system(
     system: ContactSystem,
     cells: Cells,
     *,
-    solver: str = "clarabel",
+    solver: str = "osqp",
     formulation: str = "complementarity",
     form: str = "auto",
     tolerance: float = 1e-6,
@@ -172,7 +172,7 @@ def solve_system(
 def resolve(
     cells: Cells,
     *,
-    solver: str = "clarabel",
+    solver: str = "osqp",
     formulation: str = "complementarity",
     form: str = "auto",
     tolerance: float = 1e-6,
