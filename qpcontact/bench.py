@@ -437,7 +437,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--dims", type=int, nargs="+", default=[2, 3], choices=[2, 3])
     p.add_argument("--repeats", type=int, default=3, help="timed repeats of each phase (median, min, max)")
     p.add_argument("--solvers", nargs="+", default=list(DEFAULT_SOLVERS),
-                   help="linear, a baseline (cg, cg_euclidean, bbpgd) or a qpsolvers backend with an optional /primal or "
+                   help="linear (LU), linear/lsmr, a baseline (cg, cg_euclidean, bbpgd) or a qpsolvers backend with an optional /primal or "
                         "/contact form; @TOL sets that solver's tolerance (e.g. clarabel/primal@1e-9)")
     p.add_argument("--tolerance", type=float, default=TARGET_ERROR, help="tolerance handed to the solvers")
     p.add_argument("--time-limit", type=float, default=120.0, help="seconds per QP solve, where the backend supports it")
