@@ -21,6 +21,9 @@ keep ``B̃`` as it is, and the minimum-W-norm choice is made exactly.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -262,6 +265,21 @@ def solve_qp_system(
                      extras={"blocks": len(blocks)})
 
 
+@contextlib.contextmanager
+def _quiet_stdout():
+    """Silence the C library's own prints for the duration (OSQP writes "Polishing not
+    needed" to the process's stdout even with ``verbose=False``)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
 def _solve_block(B: sp.spmatrix, rhs: np.ndarray, solver: str, formulation: str, form: str, regularization: float,
                  options: dict[str, Any]) -> QPOutcome:
     """One backend call on ``B̃ ỹ ≥ b̃`` (a whole system or one independent block)."""
@@ -271,7 +289,7 @@ def _solve_block(B: sp.spmatrix, rhs: np.ndarray, solver: str, formulation: str,
         problem = qpsolvers.Problem(*(m.toarray() if sp.issparse(m) else m for m in problem.unpack()))
     t1 = time.perf_counter()
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), (_quiet_stdout() if solver == "osqp" else contextlib.nullcontext()):
             warnings.simplefilter("ignore")  # the status is reported in the outcome instead
             solution = qpsolvers.solve_problem(problem, solver=solver, verbose=False, **options)
     except Exception as exc:  # backends raise many types; the failure is reported, not hidden

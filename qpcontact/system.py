@@ -14,7 +14,8 @@ G; in a planar scene (axes and normals in the xy-plane) only x, y, rotation abou
 
 Scaling (unit invariance): the solvers see ``B̃ ỹ ≥ b̃`` with the mass-weighted unknowns
 ``y = W^{1/2} x`` (so the kinetic-energy metric becomes Euclidean and ``‖x‖_W = ‖y‖``),
-``B̃ = J W^{1/2} / σ_B`` and ``b̃ = b / σ_b``, where ``σ_b = max|b|`` [length/time] and
+``B̃ = J W^{1/2} / σ_B`` and ``b̃ = b / σ_b``, where ``σ_b = max b`` [length/time] (the fastest
+approach; ``max|b|`` if no contact approaches) and
 ``σ_B² = mean diag(J W Jᵀ)`` [1/mass] (mean effective inverse mass of a contact). Both are
 dimensionless: a scene in µm/pg and in m/kg gives the same ``B̃``, ``b̃``, and ``ỹ``.
 Physical impulses are ``x = W^{-1/2} ỹ σ_b/σ_B``; contact impulses ``λ = λ̃ σ_b/σ_B²``.
@@ -229,7 +230,9 @@ def build_system(
         )
     # scale=False (σ_b = σ_B = 1) exists to measure what the scaling buys (docs/stability.md).
     operator_scale = float(np.sqrt(diag.mean())) if scale else 1.0
-    velocity_scale = float(np.max(np.abs(b))) if scale else 1.0
+    # The approach speeds set the scale: separating contacts kept in the system (b <= 0) must
+    # not shrink the colliding ones' right-hand sides towards the solvers' tolerances.
+    velocity_scale = (float(np.max(b)) if np.max(b) > 0 else float(np.max(np.abs(b)))) if scale else 1.0
     # Columns were numbered in row-major order of column_of (involved is sorted), so np.nonzero
     # lists them in column order.
     col_cell, col_slot = np.nonzero(column_of >= 0)

@@ -195,3 +195,13 @@ def test_a_backend_error_is_reported_as_solver_failure():
     cells = random_scene(2, n=20)
     with pytest.raises(SolverFailedError, match="clarabel"):
         qc.resolve(cells, solver="clarabel", solver_settings={"no_such_setting": 1})
+
+
+def test_backend_prints_do_not_reach_stdout(capfd):
+    """OSQP prints "Polishing not needed" from C when no constraint is active (here: a block of
+    separating contacts kept with keep_separating), even with verbose=False."""
+    cells = qc.Cells([[0, 0.9, 0], [0, 0, 0], [50, 0.9, 0], [50, 0, 0]], [[1, 0, 0], [0, 0, 1]] * 2, 2.0, 0.5,
+                     momenta=[[0, -1, 0], [0, 0, 0], [0, 1, 0], [0, 0, 0]])
+    result = qc.resolve(cells, solver="osqp", keep_separating=True)
+    assert result.converged and len(result.contacts) == 2
+    assert capfd.readouterr().out == ""
