@@ -95,12 +95,14 @@ HAND_MADE = [
     SceneCase("rod_chain", "hand-made", "rod_chain", 20),
     SceneCase("rod_across_many", "hand-made", "rod_across_many", 12),
     SceneCase("jammed_packing", "hand-made", "jammed_packing", 61),
-    # With position correction the jammed packing is over-determined: Mx = b has no solution.
+    # With position correction (uneven overlaps) the jammed packing's Mx = b has no solution.
     SceneCase("jammed_packing_pc", "hand-made", "jammed_packing", 61, position_correction=0.5, dt=1.0),
 ]
-DEFAULT_SCENES = HAND_MADE + [_colony(d, n) for d in (2, 3) for n in (100, 1000, 10_000)]
+# The 3D colony of 10⁴ cells is left out of the default set to keep it under 10 minutes on 2
+# cores (its reference alone takes ~18 s); name it with --scenes colony_3d_10000.
+DEFAULT_SCENES = HAND_MADE + [_colony(d, n) for d in (2, 3) for n in (100, 1000, 10_000) if (d, n) != (3, 10_000)]
 QUICK_SCENES = [HAND_MADE[0], HAND_MADE[3], HAND_MADE[4], _colony(2, 100), _colony(3, 100)]
-ALL_SCENES = {case.name: case for case in DEFAULT_SCENES + [_colony(d, 100_000) for d in (2, 3)]}
+ALL_SCENES = {case.name: case for case in DEFAULT_SCENES + [_colony(d, n) for d, n in ((3, 10_000), (2, 100_000), (3, 100_000))]}
 
 DEFAULT_TOLERANCES = (1e-3, 1e-6, 1e-9)
 

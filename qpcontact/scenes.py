@@ -383,7 +383,10 @@ def rod_across_many(n_cells: int = 9, seed: int = 0) -> Cells:
 def jammed_packing(n_cells: int = 61, seed: int = 0) -> Cells:
     """A hexagonal packing of spheres (l = 0, non-growing) inside a ring of fixed spheres,
     compressed towards the centre: each mobile sphere has 2 unknowns (planar) but about 3
-    contacts, so ``M x = b`` is over-determined (more contacts than unknowns)."""
+    contacts, so ``M x = b`` has more rows than unknowns. The mobile spheres are jittered by 2 %
+    of the radius so that overlaps are uneven: with position correction ``b`` then has a part no
+    velocity field produces and ``M x = b`` has no solution (with plain ``b = −u`` it always has
+    one, see docs/model-notes.md)."""
     n_cells = _check_count(n_cells, 7)
     rng = np.random.default_rng(seed)
     pitch = 2 * RADIUS * 0.95
@@ -399,7 +402,8 @@ def jammed_packing(n_cells: int = 61, seed: int = 0) -> Cells:
     # The wall: every site of the last ring and the unfilled sites of the ring before it, so
     # it touches the outermost mobile spheres.
     wall = order[np.isin(order, np.flatnonzero(hex_dist >= rings - 1)) & ~np.isin(order, inside)]
-    centers = np.vstack([pos[inside], pos[wall]])
+    mobile = pos[inside] + np.column_stack([rng.normal(0.0, 0.02 * RADIUS, (n_cells, 2)), np.zeros(n_cells)])
+    centers = np.vstack([mobile, pos[wall]])
     n_all = centers.shape[0]
     axes = np.tile([1.0, 0.0, 0.0], (n_all, 1))
     masses = np.concatenate([capsule_mass(np.zeros(n_cells), np.full(n_cells, RADIUS)), np.full(n_all - n_cells, np.inf)])
