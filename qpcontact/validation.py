@@ -105,7 +105,7 @@ def reference_solution(system: ContactSystem, formulation: str, *, tolerance: fl
         polished = active_set_polish(system, guess)
         if polished is not None:
             return polished
-    out = solve_qp_system(system, "clarabel", formulation, "primal" if formulation == "complementarity" else "contact",
+    out = solve_qp_system(system, "clarabel", formulation, "primal",
                           tolerance=tolerance)
     if out.y is None:
         raise RuntimeError(f"reference solve failed: {out.status} {out.error or ''}")
