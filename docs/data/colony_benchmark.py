@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
+import os
 import platform
 import time
 from pathlib import Path
@@ -98,7 +99,7 @@ def main() -> None:
         writer.writerows(rows)
     stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     lines = [
-        f"Measured {stamp} on {platform.machine()} (2 cores shared with other jobs), Python {platform.python_version()}; "
+        f"Measured {stamp} on {platform.machine()} (2 cores; load average {os.getloadavg()[0]:.1f} at the end of the run), Python {platform.python_version()}; "
         f"2D colony grown from 1 cell to {args.cells} cells (seed 1, `qpcontact simulate` defaults otherwise); "
         f"wall and solve times are medians of up to {args.repeats} repeats (fewer once a configuration's runs "
         f"took {BUDGET_SECONDS:.0f} s; column 'repeats'); the trajectories are deterministic, so the overlaps are the "
