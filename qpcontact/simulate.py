@@ -5,7 +5,8 @@ mean doubling times (growth rate ln 2), masses in arbitrary units (mass = volume
 ``G`` = ``--growth-inertia`` × mass). Every step: :func:`qpcontact.growth.grow` (growth drive,
 contact solve, move), then :func:`qpcontact.growth.divide`; the step size follows the colony's
 expansion (:func:`qpcontact.growth.expansion_time_step`), and a step that turns some cell too
-fast is retried with half the step (:func:`grow_limiting_turns`).
+fast (or, with ``--overlap-limit``, leaves too large an overlap) is retried with half the step
+(:func:`grow_with_retries`).
 
 Outputs in ``--out`` (default ``colony-run``):
 
@@ -37,6 +38,7 @@ from .cells import Cells
 from .errors import InvalidArgumentError, QPContactError, SolverFailedError
 from .growth import Colony, divide, expansion_time_step, grow
 from .snapshots import load_colony, save_colony
+from .step import largest_overlap
 from .surfaces import substrate
 
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
@@ -69,6 +71,28 @@ class Settings:
     seed: int = 1
     max_steps: int = 100_000
     max_halvings: int = 3
+    #: Largest overlap (fraction of the diameter) a step may leave; a step leaving more (and more
+    #: than before it) is retried with half the step. 0 = off (the default: docs/colony.md
+    #: measures the cost, 4.5× the time of a 3D run).
+    overlap_limit: float = 0.0
+
+    def __post_init__(self) -> None:
+        """Reject settings no run can use, naming the setting."""
+        positive = ("cfl", "max_dt", "radius", "division_length", "growth_inertia", "tolerance")
+        non_negative = ("margin", "position_correction", "rate", "rate_noise", "axis_noise", "damping", "sink_speed",
+                        "overlap_limit")
+        for name in positive + non_negative:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and np.isfinite(value) and (value > 0 if name in positive else value >= 0)):
+                raise InvalidArgumentError(f"{name}: must be finite and {'> 0' if name in positive else '>= 0'}, got {value!r}")
+        for name in ("cells", "max_steps", "max_halvings"):
+            value = getattr(self, name)
+            if not (isinstance(value, int) and value >= (0 if name == "max_halvings" else 1)):
+                raise InvalidArgumentError(f"{name}: must be an integer >= {0 if name == 'max_halvings' else 1}, got {value!r}")
+        if self.dimensions not in (2, 3):
+            raise InvalidArgumentError(f"dimensions: must be 2 or 3, got {self.dimensions!r}")
+        if not self.position_correction <= 1:
+            raise InvalidArgumentError(f"position_correction: must be in [0, 1], got {self.position_correction!r}")
 
 
 @dataclass
@@ -92,17 +116,27 @@ def founder(settings: Settings) -> Colony:
     return Colony.founder(cell, settings.rate)
 
 
-def grow_limiting_turns(colony: Colony, dt: float, settings: Settings, **grow_options: Any) -> tuple[Colony, Any, float, int]:
-    """:func:`qpcontact.growth.grow` by ``dt``; if the contact solve turns some cell so fast that
-    its tips would move more than ``cfl`` diameters in the step (:func:`turning_reach`), the
-    step is rejected and retried with half the step, up to ``max_halvings`` times. The contact
-    constraints hold to first order in the step, and a fast-turning short cell (a newborn
-    squeezed between neighbours) is where the second-order error shows as overlap. Returns
-    ``(colony, step_result, dt_taken, rejected_attempts)``."""
-    limit = settings.cfl * 2.0 * float(np.median(colony.cells.radii))
+def grow_with_retries(colony: Colony, dt: float, settings: Settings, **grow_options: Any) -> tuple[Colony, Any, float, int]:
+    """:func:`qpcontact.growth.grow` by ``dt``, rejected and retried with half the step (up to
+    ``max_halvings`` times; the last attempt is kept) when
+
+    - the contact solve turns some cell so fast that its tips would move more than ``cfl``
+      diameters in the step (:func:`turning_reach`): the contact constraints hold to first
+      order in the step, and a fast-turning short cell (a newborn squeezed between neighbours)
+      is where the second-order error shows as overlap;
+    - ``overlap_limit > 0`` and the new state's largest overlap exceeds both that limit and the
+      largest overlap before the step (:func:`largest_overlap`).
+
+    Returns ``(colony, step_result, dt_taken, rejected_attempts)``."""
+    reach_limit = settings.cfl * 2.0 * float(np.median(colony.cells.radii))
     for attempt in range(settings.max_halvings + 1):
         grown, out = grow(colony, dt, **grow_options)
-        if attempt == settings.max_halvings or turning_reach(out.result.cells, dt) <= limit:
+        accept = turning_reach(out.result.cells, dt) <= reach_limit
+        if accept and settings.overlap_limit > 0:
+            # out.max_overlap is the overlap of the state the step starts from.
+            bound = max(settings.overlap_limit, out.max_overlap)
+            accept = largest_overlap(grown.cells, grow_options.get("planes", ())) <= bound
+        if attempt == settings.max_halvings or accept:
             return grown, out, dt, attempt
         dt /= 2.0
     raise AssertionError("unreachable")
@@ -157,7 +191,7 @@ def run_colony(settings: Settings, *, start: Colony | None = None, progress: boo
             drive[:, 2] = -settings.sink_speed * np.where(np.isfinite(colony.cells.masses), colony.cells.masses, 0.0)
         t0 = time.perf_counter()
         try:
-            grown, out, dt, rejected = grow_limiting_turns(colony, dt, settings, drive=drive, **options)
+            grown, out, dt, rejected = grow_with_retries(colony, dt, settings, drive=drive, **options)
         except SolverFailedError as exc:
             error = f"step {step} (t = {colony.time:.4g}, {colony.cells.n} cells): contact solve failed, not applied: {exc}"
             break
@@ -228,8 +262,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--sink-speed", type=float, default=d.sink_speed,
                    help="3D only: every cell is driven towards the substrate at this speed [µm/time]")
     p.add_argument("--max-halvings", type=int, default=d.max_halvings,
-                   help="a step that turns a cell's tips by more than --cfl diameters is retried with half the step, "
-                        "at most this many times (0: never)")
+                   help="a step that turns a cell's tips by more than --cfl diameters (or leaves more overlap than "
+                        "--overlap-limit) is retried with half the step, at most this many times (0: never)")
+    p.add_argument("--overlap-limit", type=float, default=d.overlap_limit,
+                   help="retry a step that leaves a larger overlap than this [fraction of the diameter] and than "
+                        "before the step (0: off)")
     p.add_argument("--seed", type=int, default=d.seed, help="random seed (division noise)")
     p.add_argument("--max-steps", type=int, default=d.max_steps)
     p.add_argument("--start", type=Path, help="start from this snapshot (.npz) instead of one cell")
@@ -243,10 +280,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(sys.argv[1:] if argv is None else argv)
     names = {f for f in Settings.__dataclass_fields__}
-    settings = Settings(**{k: v for k, v in vars(args).items() if k in names})
     from .plots import animate, plot_history, save_colony_picture  # matplotlib only when drawing
 
     try:
+        settings = Settings(**{k: v for k, v in vars(args).items() if k in names})
         start = load_colony(args.start)[0] if args.start else None
         run = run_colony(settings, start=start, progress=not args.quiet, snapshot_dir=args.out / "snapshots",
                          snapshot_every=args.snapshot_every, frame_growth=1.08 if args.gif else 0.0)

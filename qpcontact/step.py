@@ -110,6 +110,13 @@ def overlap_fractions(cells: Cells, contacts: Contacts) -> np.ndarray:
     return np.maximum(0.0, -contacts.separation) / (cells.radii[contacts.cell_a] + radius_b)
 
 
+def largest_overlap(cells: Cells, planes: Sequence[Any] = ()) -> float:
+    """Largest overlap of two cells, or of a cell and a plane (:mod:`qpcontact.surfaces`), as a
+    fraction of the diameter (:func:`overlap_fractions`; 0 when nothing overlaps)."""
+    contacts = concatenate([find_contacts(cells), plane_contacts(cells, planes, 0.0)])
+    return float(overlap_fractions(cells, contacts).max(initial=0.0))
+
+
 def speculative(contacts: Contacts, dt: float) -> Contacts:
     """The contacts with ``u`` replaced by ``u + max(0, d)/dt``: a gap ``d > 0`` may close
     within the step, no more (overlapping contacts are unchanged)."""

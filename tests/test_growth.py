@@ -118,3 +118,17 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
     assert np.all(last.parent_ids < last.ids)
     rows = (out / "history.csv").read_text().splitlines()
     assert rows[0].startswith("step,time,dt,cells") and len(rows) == step + 1
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"cfl": -1.0}, "cfl: must be finite and > 0"),
+    ({"overlap_limit": float("nan")}, "overlap_limit: must be finite and >= 0"),
+    ({"cells": 0}, "cells: must be an integer >= 1"),
+    ({"dimensions": 4}, "dimensions: must be 2 or 3"),
+    ({"position_correction": 1.5}, r"position_correction: must be in \[0, 1\]"),
+])
+def test_simulate_settings_are_checked(change, message):
+    from qpcontact.simulate import Settings
+
+    with pytest.raises(InvalidArgumentError, match=message):
+        Settings(**change)

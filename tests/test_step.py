@@ -151,3 +151,24 @@ def test_contacts_that_do_not_collide_before_the_solve_must_still_be_in_the_syst
     assert all_near.min() > -1e-6  # nothing approaches any more
     with pytest.raises(InvalidArgumentError, match="keep_separating"):
         q.resolve(cells, solver="linear", contacts=contacts, keep_separating=True)
+
+
+def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbour():
+    """A cell driven 1 µm towards a neighbour 0.5 µm away (beyond the 0.3 µm margin, so the
+    contact is not in the step's system): the full step ends with half a diameter of overlap;
+    with ``overlap_limit`` the step is retried with half the step, which ends touching."""
+    from qpcontact.growth import Colony
+    from qpcontact.simulate import Settings, grow_with_retries
+    from qpcontact.step import largest_overlap
+
+    cells = q.Cells(centers=[[0, 0, 0], [1.5, 0, 0]], axes=[0, 1, 0], lengths=2.0, radii=0.5, growth_inertia=np.inf)
+    colony = Colony.founder(cells, 0.0)
+    drive = np.zeros((2, 7))
+    drive[0, 0] = 10.0 * cells.masses[0]  # 10 µm per unit time along +x
+    options = dict(drive=drive, planar=True, margin=0.3, solver="clarabel", tolerance=1e-8)
+    plain, _, dt_plain, rejected_plain = grow_with_retries(colony, 0.1, Settings(), **options)
+    assert (dt_plain, rejected_plain) == (0.1, 0)
+    assert largest_overlap(plain.cells) == pytest.approx(0.5, abs=1e-9)
+    limited, _, dt_limited, rejected = grow_with_retries(colony, 0.1, Settings(overlap_limit=0.1), **options)
+    assert (dt_limited, rejected) == (0.05, 1)
+    assert largest_overlap(limited.cells) <= 1e-9
