@@ -33,12 +33,13 @@ BASELINES = ("cg", "cg_euclidean", "bbpgd")
 
 
 @dataclass
-class BaselineSolution:
-    """Output of a baseline solver (scaled units).
+class IterativeSolution:
+    """Output of an iterative solver: the baselines here and :func:`qpcontact.mprgp.mprgp` (scaled
+    units).
 
     Attributes:
         y: (n,) scaled unknowns ``ỹ`` (the last iterate, converged or not).
-        lam: (K,) scaled contact impulses ``λ̃`` (BBPGD), or None (CG works in ``ỹ`` only).
+        lam: (K,) scaled contact impulses ``λ̃`` (BBPGD, MPRGP), or None (CG works in ``ỹ`` only).
         iterations: iterations done.
         converged: the stopping test was met.
         status: ``"converged"``, ``"max_iterations"``, ``"time_limit"`` or ``"breakdown"``.
@@ -55,7 +56,7 @@ class BaselineSolution:
     seconds: float
 
 
-def _check(tol: float, max_iterations: int | None, time_limit: float | None) -> None:
+def check_options(tol: float, max_iterations: int | None, time_limit: float | None) -> None:
     if not (np.isfinite(tol) and 0 < tol < 1):
         raise InvalidArgumentError(f"tol: must be in (0, 1), got {tol!r}")
     if max_iterations is not None and max_iterations < 1:
@@ -71,7 +72,7 @@ def conjugate_gradient(
     metric: str = "W",
     max_iterations: int | None = None,
     time_limit: float | None = None,
-) -> BaselineSolution:
+) -> IterativeSolution:
     """CGNR from zero on ``B ỹ = b̃`` (see the module docstring).
 
     Args:
@@ -82,7 +83,7 @@ def conjugate_gradient(
         max_iterations: cap (default ``2·n``: exact arithmetic needs at most ``rank ≤ n``).
         time_limit: stop after this many seconds.
     """
-    _check(tol, max_iterations, time_limit)
+    check_options(tol, max_iterations, time_limit)
     start = time.perf_counter()
     matrix, rhs = system.matrix, system.rhs
     k, n = matrix.shape
@@ -126,7 +127,7 @@ def conjugate_gradient(
         if np.sqrt(gamma) <= target:
             status = "converged"
     residual = np.sqrt(gamma) / max(target / tol, 1e-300)
-    return BaselineSolution(column * z, None, iterations, status == "converged", status, float(residual),
+    return IterativeSolution(column * z, None, iterations, status == "converged", status, float(residual),
                             time.perf_counter() - start)
 
 
@@ -137,7 +138,7 @@ def bbpgd(
     max_iterations: int | None = None,
     time_limit: float | None = None,
     initial: np.ndarray | None = None,
-) -> BaselineSolution:
+) -> IterativeSolution:
     """Barzilai–Borwein projected gradient on ``min ½λ̃ᵀÃλ̃ − b̃ᵀλ̃, λ̃ ≥ 0``.
 
     Steps alternate BB1 (``sᵀs/sᵀΔg``) and BB2 (``sᵀΔg/ΔgᵀΔg``), the first one is the exact
@@ -151,7 +152,7 @@ def bbpgd(
         time_limit: stop after this many seconds.
         initial: starting ``λ̃ ≥ 0`` (default zero).
     """
-    _check(tol, max_iterations, time_limit)
+    check_options(tol, max_iterations, time_limit)
     start = time.perf_counter()
     matrix, rhs = system.matrix, system.rhs
     k = matrix.shape[0]
@@ -189,12 +190,12 @@ def bbpgd(
     else:
         if residual <= tol:
             status = "converged"
-    return BaselineSolution(matrix.T @ lam, lam, iterations, status == "converged", status, residual,
+    return IterativeSolution(matrix.T @ lam, lam, iterations, status == "converged", status, residual,
                             time.perf_counter() - start)
 
 
 def solve_baseline(system: ContactSystem, name: str, *, tolerance: float, time_limit: float | None = None,
-                   max_iterations: int | None = None) -> BaselineSolution:
+                   max_iterations: int | None = None) -> IterativeSolution:
     """Run the baseline ``name`` (one of :data:`BASELINES`)."""
     if name == "cg":
         return conjugate_gradient(system, tol=tolerance, time_limit=time_limit, max_iterations=max_iterations)

@@ -9,6 +9,7 @@ cells by default) the benchmark times, with repeats (median, min, max):
   :func:`~qpcontact.resolve.solve_system` (setup + solve), and the field's baselines from
   :mod:`qpcontact.baselines`: ``cg`` (conjugate gradient on the normal equations from zero, as
   in CellModeller) and ``bbpgd`` (projected gradient on the contact-space complementarity QP);
+  the built-in matrix-free QP solver ``mprgp`` (:mod:`qpcontact.mprgp`) runs like a backend;
 - *check*: the error measures of :mod:`qpcontact.metrics` on one answer.
 
 Every answer is verified, untimed, against a high-accuracy reference: the QP answers against
@@ -57,7 +58,7 @@ from .system import ContactSystem, build_system
 from .validation import active_set_polish, reference_solution
 
 #: Solver specs ``name[/form]`` timed by default: the floor, the baseline, and the QP backends.
-DEFAULT_SOLVERS = ("linear", "linear/lsmr", "cg@1e-8", "osqp/contact", "osqp/primal", "clarabel/primal@1e-9")
+DEFAULT_SOLVERS = ("linear", "linear/lsmr", "cg@1e-8", "mprgp", "osqp/contact", "osqp/primal", "clarabel/primal@1e-9")
 #: The relative error every answer must reach (issue 6).
 TARGET_ERROR = 1e-6
 #: Solvers of the plain problem ``M x = b`` (checked against the linear solve, not the QP).
@@ -407,7 +408,7 @@ def profile_step(dim: int, n: int, seed: int, solver: str, tolerance: float, cac
 #: the 3D Delassus operator 0.5 s at 10⁴ cells and more than 8 minutes at 10⁵ (exponent > 3);
 #: a factorization cannot be interrupted, so the benchmark must not start one it cannot finish.
 EXTRAPOLATION_EXPONENT = {"iterative": 1.5, 2: 2.0, 3: 3.0}
-ITERATIVE = ("cg", "cg_euclidean", "bbpgd")
+ITERATIVE = ("cg", "cg_euclidean", "bbpgd", "mprgp")
 
 
 def _too_slow(previous: dict[str, Any] | None, n: int, solvers: list[str], limit: float) -> dict[str, str]:

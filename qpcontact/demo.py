@@ -13,7 +13,7 @@ from pathlib import Path
 from . import metrics
 from .contacts import colliding, find_contacts
 from .errors import QPContactError
-from .qp import FORMULATIONS, available_solvers
+from .qp import FORMULATIONS, available_solvers, formulations_of
 from .resolve import resolve
 from .scenes import colony_2d, colony_3d
 from .system import build_system
@@ -31,7 +31,7 @@ def run(n_cells: int, seed: int, dimension: int, tolerance: float) -> tuple[str,
     references["linear"] = references["least_squares"]  # the same answer when M x = b is consistent
     rows = []
     for solver in available_solvers():
-        for formulation in (["complementarity"] if solver == "linear" else FORMULATIONS):
+        for formulation in formulations_of(solver):
             start = time.perf_counter()
             try:
                 r = resolve(cells, solver=solver, formulation=formulation, tolerance=tolerance, on_failure="return")

@@ -14,6 +14,10 @@ least_squares, contact    lifted: ``min ½‖r‖² + ½ελ̃ᵀÃλ̃  s.t. Ã
                           ``ỹ = B̃ᵀλ̃`` (unique even where λ̃ is not).
 ========================  =================================================================
 
+Besides the qpsolvers backends, ``solver="mprgp"`` is built in (:mod:`qpcontact.mprgp`): a
+matrix-free solver of the complementarity/contact problem, the one that scales to 3D biofilms of
+10⁵ cells, where every factorization fills in.
+
 Why not ``P = MᵀM + εI``: ``MᵀM`` is singular, a small Euclidean ε does not pin ``Δp`` down to
 solver tolerance, and forming it is slow (model.md, "What is already known"). The lifted forms
 keep ``B̃`` as it is, and the minimum-W-norm choice is made exactly.
@@ -34,8 +38,9 @@ import qpsolvers
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .errors import SolverNotInstalledError, UnknownSolverError
+from .errors import InvalidArgumentError, SolverNotInstalledError, UnknownSolverError
 from .linear import solve_min_norm
+from .mprgp import mprgp
 from .system import ContactSystem
 
 FORMULATIONS = ("least_squares", "complementarity")
@@ -91,15 +96,24 @@ def _tolerance_settings(backend: str, tol: float, time_limit: float | None, form
     return s
 
 
+#: Built-in solvers that take only the complementarity formulation in contact form.
+CONTACT_SPACE_SOLVERS = ("mprgp",)
+
+
 def available_solvers() -> list[str]:
-    """Solver names usable here: ``"linear"`` (the plain solve) and every installed qpsolvers
-    backend, sorted."""
-    return ["linear", *sorted(qpsolvers.available_solvers)]
+    """Solver names usable here: ``"linear"`` (the plain solve), ``"mprgp"`` (built in,
+    complementarity only) and every installed qpsolvers backend, sorted."""
+    return ["linear", *CONTACT_SPACE_SOLVERS, *sorted(qpsolvers.available_solvers)]
+
+
+def formulations_of(solver: str) -> tuple[str, ...]:
+    """The formulations a solver takes (``"linear"`` ignores the formulation: one entry)."""
+    return ("complementarity",) if solver == "linear" or solver in CONTACT_SPACE_SOLVERS else FORMULATIONS
 
 
 def check_solver(name: str) -> None:
     """Raise :class:`UnknownSolverError` or :class:`SolverNotInstalledError` for a bad name."""
-    if name == "linear" or name in qpsolvers.available_solvers:
+    if name == "linear" or name in CONTACT_SPACE_SOLVERS or name in qpsolvers.available_solvers:
         return
     if name in KNOWN_BACKENDS:
         raise SolverNotInstalledError(
@@ -224,6 +238,8 @@ def solve_qp_system(
     but each part stops when it is converged instead of waiting for the hardest one. ``found`` is
     true only if every block was solved; ``iterations`` is the largest of the blocks'."""
     check_solver(solver)
+    if solver in CONTACT_SPACE_SOLVERS:
+        return _solve_mprgp(system, tolerance, time_limit, settings or {})
     options = {**_tolerance_settings(solver, tolerance, time_limit, formulation), **(settings or {})}
     B, rhs = system.matrix, system.rhs
     k, n = B.shape
@@ -263,6 +279,16 @@ def solve_qp_system(
     status = " / ".join(dict.fromkeys(statuses))
     return QPOutcome(y, lam if has_lam else None, True, status, max(iterations, default=None), setup, solve,
                      extras={"blocks": len(blocks)})
+
+
+def _solve_mprgp(system: ContactSystem, tolerance: float, time_limit: float | None, settings: dict[str, Any]) -> QPOutcome:
+    """The built-in MPRGP on the whole system (matrix-free: no gain from splitting it)."""
+    unknown = set(settings) - {"max_iterations", "initial", "proportioning"}
+    if unknown:
+        raise InvalidArgumentError(f"solver_settings: mprgp takes max_iterations, initial, proportioning; got {sorted(unknown)}")
+    out = mprgp(system.matrix, system.rhs, tol=tolerance, time_limit=time_limit, **settings)
+    return QPOutcome(out.y, out.lam, out.converged, out.status, out.iterations, 0.0, out.seconds,
+                     extras={"blocks": 1, "residual": out.residual})
 
 
 @contextlib.contextmanager

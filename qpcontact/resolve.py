@@ -14,7 +14,7 @@ from .cells import Cells
 from .contacts import Contacts, colliding, find_contacts
 from .errors import InvalidArgumentError, SolverFailedError
 from .linear import solve_min_norm
-from .qp import FORMS, FORMULATIONS, check_solver, solve_qp_system
+from .qp import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS, check_solver, solve_qp_system
 from .system import ContactSystem, build_system
 
 #: Default form per formulation (see qpcontact.qp; chosen from docs/solvers.md measurements).
@@ -92,6 +92,9 @@ def _check_options(solver: str, formulation: str, form: str, tolerance: float, t
         raise InvalidArgumentError(f"tolerance: must be in (0, 1), got {tolerance!r}")
     if time_limit is not None and not time_limit > 0:
         raise InvalidArgumentError(f"time_limit: must be > 0 seconds, got {time_limit!r}")
+    if solver in CONTACT_SPACE_SOLVERS and (formulation != "complementarity" or form == "primal"):
+        raise InvalidArgumentError(f"solver {solver!r} solves the complementarity formulation in contact form only "
+                                   f"(got formulation {formulation!r}, form {form!r})")
     if on_failure not in ("raise", "return"):
         raise InvalidArgumentError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
 
@@ -194,8 +197,10 @@ def resolve(
 
     Args:
         cells: the scene (positions, shapes, masses, momenta before contact).
-        solver: ``"linear"`` (plain minimum-W-norm solve of ``Mx = b``) or an installed qpsolvers
-            backend (``"clarabel"``, ``"osqp"``, ...; see :func:`qpcontact.available_solvers`).
+        solver: ``"linear"`` (plain minimum-W-norm solve of ``Mx = b``), ``"mprgp"`` (built-in
+            matrix-free QP solver, complementarity only: :mod:`qpcontact.mprgp`) or an installed
+            qpsolvers backend (``"clarabel"``, ``"osqp"``, ...; see
+            :func:`qpcontact.available_solvers`).
         formulation: ``"complementarity"`` (impulses only push; default) or ``"least_squares"``.
             Ignored by ``solver="linear"``.
         form: ``"primal"``, ``"contact"`` or ``"auto"`` (see :mod:`qpcontact.qp`).
@@ -213,7 +218,8 @@ def resolve(
         time_limit: seconds the solver may take, where the backend supports it.
         regularization: ε of the least_squares formulation (dimensionless; default 0 = the exact
             minimum-W-norm selection).
-        solver_settings: extra backend options, passed through to qpsolvers.
+        solver_settings: extra backend options, passed through to qpsolvers (for ``"mprgp"``:
+            ``max_iterations``, ``initial`` contact impulses, ``proportioning``).
         estimate_condition: also estimate the condition number of the scaled Delassus operator.
         on_failure: ``"raise"`` a :class:`~qpcontact.errors.SolverFailedError` (default), or
             ``"return"`` the unconverged result (with ``cells`` unchanged).

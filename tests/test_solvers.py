@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 import qpcontact as qc
 from qpcontact.contacts import relative_normal_velocity
 from qpcontact.errors import InvalidArgumentError, SolverFailedError, SolverNotInstalledError, UnknownSolverError
-from qpcontact.qp import KNOWN_BACKENDS
+from qpcontact.qp import KNOWN_BACKENDS, formulations_of
 
 from conftest import random_scene
 
@@ -50,7 +50,7 @@ def test_two_capsules_get_the_textbook_inelastic_impulse(solver, tilt):
         result = qc.resolve(cells, solver=solver, tolerance=1e-8)
     except SolverFailedError:
         # Optional backends may fail, but only loudly; the default ones must solve this.
-        assert solver not in ("linear", "osqp", "clarabel")
+        assert solver not in ("linear", "mprgp", "osqp", "clarabel")
         return
     assert len(result.contacts) == 1
     expected = textbook_impulse(cells, result.contacts)
@@ -62,8 +62,7 @@ def test_two_capsules_get_the_textbook_inelastic_impulse(solver, tilt):
     assert post_velocity(result)[0] == pytest.approx(0.0, abs=1e-5 * abs(result.contacts.normal_velocity[0]))
 
 
-@pytest.mark.parametrize("solver", qc.available_solvers())
-@pytest.mark.parametrize("formulation", FORMULATIONS)
+@pytest.mark.parametrize("solver, formulation", [(s, f) for s in qc.available_solvers() for f in formulations_of(s)])
 @pytest.mark.parametrize("seed", range(3))
 def test_invariants_after_every_solve(solver, formulation, seed):
     cells = random_scene(seed, n=40)
@@ -90,8 +89,8 @@ def test_qp_equals_the_linear_solve_when_all_contacts_are_active(seed, n, planar
     assume(len(linear.contacts) > 0 and np.all(linear.contact_impulses > 1e-6 * np.max(linear.contact_impulses)))
     reference = linear.impulses
     scale = np.max(np.abs(reference))
-    for solver in ("osqp", "clarabel"):
-        for formulation in FORMULATIONS:
+    for solver in ("osqp", "clarabel", "mprgp"):
+        for formulation in formulations_of(solver):
             result = qc.resolve(cells, solver=solver, formulation=formulation, tolerance=1e-9)
             agreement = qc.compare_with_linear(result, tolerance=1e-4)
             assert agreement.all_active, (solver, formulation)
