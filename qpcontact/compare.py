@@ -47,7 +47,7 @@ from .baselines import BASELINES, solve_baseline
 from .cells import Cells
 from .contacts import colliding, find_contacts
 from .linear import solve_min_norm
-from .qp import FORMS, FORMULATIONS
+from .qp import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS
 from .resolve import ACCEPT_FACTOR, solve_system
 from .scenes import make_scene
 from .system import ContactSystem, build_system
@@ -121,22 +121,22 @@ class Method:
 
 
 def all_methods(solvers: list[str] | None = None) -> list[Method]:
-    """Methods for these solver names (default: linear, the baselines and every installed
-    qpsolvers backend)."""
-    names = solvers or ["linear", *BASELINES, *sorted(qpsolvers.available_solvers)]
+    """Methods for these solver names (default: linear, the baselines, the built-in MPRGP and
+    every installed qpsolvers backend)."""
+    names = solvers or ["linear", *BASELINES, *CONTACT_SPACE_SOLVERS, *sorted(qpsolvers.available_solvers)]
     out = []
     for name in names:
         if name == "linear":
             out.append(Method("linear", "linear", "contact"))
         elif name in ("cg", "cg_euclidean"):
             out.append(Method(name, "linear", "normal_equations"))
-        elif name == "bbpgd":
+        elif name == "bbpgd" or name in CONTACT_SPACE_SOLVERS:
             out.append(Method(name, "complementarity", "contact"))
         elif name in qpsolvers.available_solvers:
             out += [Method(name, f, form) for f in FORMULATIONS for form in FORMS]
         else:
             raise SystemExit(f"qpcontact compare: unknown or uninstalled solver {name!r}; "
-                             f"known: linear, {', '.join(BASELINES)}, {', '.join(sorted(qpsolvers.available_solvers))}")
+                             f"known: linear, {', '.join((*BASELINES, *CONTACT_SPACE_SOLVERS, *sorted(qpsolvers.available_solvers)))}")
     return out
 
 
@@ -594,7 +594,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="qpcontact compare", description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", help="comma-separated scene names or families (default: the default set; "
                         f"known: {', '.join(ALL_SCENES)})")
-    parser.add_argument("--solvers", help="comma-separated solvers (default: linear, cg, cg_euclidean, bbpgd and "
+    parser.add_argument("--solvers", help="comma-separated solvers (default: linear, cg, cg_euclidean, bbpgd, mprgp and "
                         "every installed qpsolvers backend)")
     parser.add_argument("--tolerances", default=None, help="comma-separated tolerances (default 1e-3,1e-6,1e-9)")
     parser.add_argument("--repeats", type=int, default=3, help="repeats per run; the median time is kept (default 3)")

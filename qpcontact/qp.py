@@ -54,6 +54,10 @@ KNOWN_BACKENDS = (
 )
 
 
+#: Built-in solvers that take only the complementarity formulation in contact form.
+CONTACT_SPACE_SOLVERS = ("mprgp",)
+
+
 def _tolerance_settings(backend: str, tol: float, time_limit: float | None, formulation: str = "complementarity") -> dict[str, Any]:
     """Backend options that make it stop at (scaled, dimensionless) tolerance ``tol``.
 
@@ -62,7 +66,9 @@ def _tolerance_settings(backend: str, tol: float, time_limit: float | None, form
     squared there (measured: Clarabel 5e-3 → 4e-6 distance to the exact answer at tol 1e-6)."""
     s: dict[str, Any]
     gap = max(tol * tol, 1e-15) if formulation == "least_squares" else tol
-    if backend == "osqp":
+    if backend in CONTACT_SPACE_SOLVERS:  # qpcontact.mprgp's own arguments
+        s = {"tol": tol, "time_limit": time_limit}
+    elif backend == "osqp":
         # polish: after convergence OSQP solves the KKT system of its active set once; where that
         # succeeds the answer is exact (10⁵-cell colony: error 4e-7 → 5e-10 for +3 % time).
         s = {"eps_abs": tol, "eps_rel": tol, "max_iter": 200_000, "eps_prim_inf": min(1e-6, tol), "eps_dual_inf": min(1e-6, tol),
@@ -94,10 +100,6 @@ def _tolerance_settings(backend: str, tol: float, time_limit: float | None, form
     else:  # backends without a tolerance option (quadprog, daqp, ...) solve to their own accuracy
         s = {}
     return s
-
-
-#: Built-in solvers that take only the complementarity formulation in contact form.
-CONTACT_SPACE_SOLVERS = ("mprgp",)
 
 
 def available_solvers() -> list[str]:
@@ -238,8 +240,8 @@ def solve_qp_system(
     but each part stops when it is converged instead of waiting for the hardest one. ``found`` is
     true only if every block was solved; ``iterations`` is the largest of the blocks'."""
     check_solver(solver)
-    if solver in CONTACT_SPACE_SOLVERS:
-        return _solve_mprgp(system, tolerance, time_limit, settings or {})
+    if solver in CONTACT_SPACE_SOLVERS and set(settings or {}) - {"max_iterations", "proportioning"}:
+        raise InvalidArgumentError(f"solver_settings: mprgp takes max_iterations and proportioning; got {sorted(settings)}")
     options = {**_tolerance_settings(solver, tolerance, time_limit, formulation), **(settings or {})}
     B, rhs = system.matrix, system.rhs
     k, n = B.shape
@@ -281,16 +283,6 @@ def solve_qp_system(
                      extras={"blocks": len(blocks)})
 
 
-def _solve_mprgp(system: ContactSystem, tolerance: float, time_limit: float | None, settings: dict[str, Any]) -> QPOutcome:
-    """The built-in MPRGP on the whole system (matrix-free: no gain from splitting it)."""
-    unknown = set(settings) - {"max_iterations", "initial", "proportioning"}
-    if unknown:
-        raise InvalidArgumentError(f"solver_settings: mprgp takes max_iterations, initial, proportioning; got {sorted(unknown)}")
-    out = mprgp(system.matrix, system.rhs, tol=tolerance, time_limit=time_limit, **settings)
-    return QPOutcome(out.y, out.lam, out.converged, out.status, out.iterations, 0.0, out.seconds,
-                     extras={"blocks": 1, "residual": out.residual})
-
-
 @contextlib.contextmanager
 def _quiet_stdout():
     """Silence the C library's own prints for the duration (OSQP writes "Polishing not
@@ -309,6 +301,9 @@ def _quiet_stdout():
 def _solve_block(B: sp.spmatrix, rhs: np.ndarray, solver: str, formulation: str, form: str, regularization: float,
                  options: dict[str, Any]) -> QPOutcome:
     """One backend call on ``B̃ ỹ ≥ b̃`` (a whole system or one independent block)."""
+    if solver in CONTACT_SPACE_SOLVERS:
+        out = mprgp(B, rhs, **options)
+        return QPOutcome(out.y, out.lam, out.converged, out.status, out.iterations, 0.0, out.seconds)
     t0 = time.perf_counter()
     problem = _problem(B, rhs, formulation, form, regularization)
     if solver in qpsolvers.dense_solvers and solver not in qpsolvers.sparse_solvers:

@@ -219,7 +219,7 @@ def resolve(
         regularization: ε of the least_squares formulation (dimensionless; default 0 = the exact
             minimum-W-norm selection).
         solver_settings: extra backend options, passed through to qpsolvers (for ``"mprgp"``:
-            ``max_iterations``, ``initial`` contact impulses, ``proportioning``).
+            ``max_iterations``, ``proportioning``).
         estimate_condition: also estimate the condition number of the scaled Delassus operator.
         on_failure: ``"raise"`` a :class:`~qpcontact.errors.SolverFailedError` (default), or
             ``"return"`` the unconverged result (with ``cells`` unchanged).

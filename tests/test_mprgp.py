@@ -91,7 +91,7 @@ def test_mprgp_takes_only_the_complementarity_formulation_and_its_own_settings()
         qc.resolve(cells, solver="mprgp", formulation="least_squares")
     with pytest.raises(InvalidArgumentError, match="contact form only"):
         qc.resolve(cells, solver="mprgp", form="primal")
-    with pytest.raises(InvalidArgumentError, match="mprgp takes max_iterations"):
+    with pytest.raises(InvalidArgumentError, match="mprgp takes max_iterations and proportioning"):
         qc.resolve(cells, solver="mprgp", solver_settings={"eps_abs": 1e-3})
     with pytest.raises(InvalidArgumentError, match="proportioning"):
         qc.resolve(cells, solver="mprgp", solver_settings={"proportioning": -1.0})

@@ -29,13 +29,14 @@ from qpcontact.snapshots import load_colony
 from qpcontact.step import overlap_fractions
 
 HERE = Path(__file__).resolve().parent
-CONFIGS = [("osqp", 1e-3), ("osqp", 1e-4), ("clarabel", 1e-6)]
+CONFIGS = ["osqp@1e-3", "osqp@1e-4", "clarabel@1e-6", "mprgp@1e-6"]
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("starts", nargs="+", help="snapshot .npz, folder of snapshots, or colony_2d:N")
     parser.add_argument("--steps", type=int, default=5)
+    parser.add_argument("--solvers", nargs="+", default=CONFIGS, help="solver@tolerance, each run from the same start")
     parser.add_argument("--out", type=Path, default=HERE / "colony_10k.md")
     args = parser.parse_args()
     s = Settings()
@@ -48,7 +49,7 @@ def main() -> None:
     ]
     for spec in args.starts:
         start, label = load_start(spec, s)
-        lines += measure(start, label, s, args.steps)
+        lines += measure(start, label, s, args.steps, [(c.split("@")[0], float(c.split("@")[1])) for c in args.solvers])
     args.out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
@@ -67,9 +68,9 @@ def load_start(spec: str, s: Settings) -> tuple[Colony, str]:
     return colony, f"grown by `qpcontact simulate` to {colony.cells.n} cells (t = {colony.time:.2f})"
 
 
-def measure(start: Colony, label: str, s: Settings, steps: int) -> list[str]:
+def measure(start: Colony, label: str, s: Settings, steps: int, configs: list[tuple[str, float]]) -> list[str]:
     lines = []
-    for solver, tolerance in CONFIGS:
+    for solver, tolerance in configs:
         colony = start
         rng = np.random.default_rng(0)
         rows, error = [], ""
