@@ -4,8 +4,7 @@ Data flow: :class:`Cells` → :func:`find_contacts` / :func:`colliding` → :fun
 :func:`resolve` (plain linear solve or a QP through qpsolvers) → :class:`Result`.
 """
 
-from .cells import Cells
-from .contacts import Contacts, colliding, concatenate, find_contacts
+from .assembly.system import ContactSystem, build_system
 from .errors import (
     InvalidArgumentError,
     InvalidCellsError,
@@ -14,10 +13,10 @@ from .errors import (
     SolverNotInstalledError,
     UnknownSolverError,
 )
-from .qp import FORMULATIONS, available_solvers
-from .resolve import Result, resolve, solve_system
-from .system import ContactSystem, build_system
-from .validation import Agreement, compare_with_linear, reference_solution
+from .geometry.cells import Cells
+from .geometry.contacts import Contacts, colliding, concatenate, find_contacts
+from .resolve import Agreement, Result, compare_with_linear, reference_solution, resolve, solve_system
+from .solvers.qpsolvers_bridge import FORMULATIONS, available_solvers
 
 __version__ = "0.1.0"
 

@@ -11,11 +11,11 @@ import sys
 
 #: subcommand -> (module, one-line help). Each module has ``main(argv: list[str]) -> int``.
 COMMANDS = {
-    "demo": ("qpcontact.demo", "resolve a small scene with every installed solver and print a table"),
-    "compare": ("qpcontact.compare", "solver comparison: error against run time on colony scenes"),
-    "stability": ("qpcontact.stability", "run every solver on the catalogue of stiff and extreme cases"),
-    "simulate": ("qpcontact.simulate", "grow a colony, save snapshots and pictures"),
-    "bench": ("qpcontact.bench", "time each phase of a step at colony scale"),
+    "demo": ("qpcontact.studies.demo", "resolve a small scene with every installed solver and print a table"),
+    "compare": ("qpcontact.studies.compare", "solver comparison: error against run time on colony scenes"),
+    "stability": ("qpcontact.studies.stability", "run every solver on the catalogue of stiff and extreme cases"),
+    "simulate": ("qpcontact.colony.simulate", "grow a colony, save snapshots and pictures"),
+    "bench": ("qpcontact.studies.bench", "time each phase of a step at colony scale"),
 }
 
 

@@ -12,9 +12,12 @@ import pytest
 import scipy.sparse as sp
 
 import qpcontact as qc
-from qpcontact import bench, metrics, qp, scenes
-from qpcontact.contacts import candidate_pairs, narrow_phase
-from qpcontact.system import slot_basis, slot_directions
+from qpcontact.studies import bench
+from qpcontact.resolve import metrics
+from qpcontact.solvers import qpsolvers_bridge as qp
+from qpcontact.studies import scenes
+from qpcontact.geometry.contacts import candidate_pairs, narrow_phase
+from qpcontact.assembly.system import slot_basis, slot_directions
 
 from conftest import random_scene
 

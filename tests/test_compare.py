@@ -7,11 +7,15 @@ import time
 import numpy as np
 import pytest
 
-from qpcontact import build_system, colliding, find_contacts, metrics, reference_solution, scenes
-from qpcontact import compare
-from qpcontact.baselines import bbpgd, conjugate_gradient, solve_baseline
+from qpcontact import build_system, colliding, find_contacts, reference_solution
+
+from qpcontact.resolve import metrics
+
+from qpcontact.studies import scenes
+from qpcontact.studies import compare
+from qpcontact.solvers.baselines import bbpgd, conjugate_gradient, solve_baseline
 from qpcontact.errors import InvalidArgumentError
-from qpcontact.linear import solve_min_norm
+from qpcontact.solvers.linear import solve_min_norm
 
 
 @pytest.fixture(scope="module")
@@ -124,7 +128,8 @@ def test_baseline_arguments_are_checked(colony):
 def test_a_failed_block_gives_no_partial_answer(monkeypatch):
     """qp.solve_qp_system splits independent components into blocks; when one block fails, the
     outcome must carry no ỹ (a block's ỹ has only its own columns: resolve crashed on it)."""
-    from qpcontact import qp, resolve
+    from qpcontact.solvers import qpsolvers_bridge as qp
+    from qpcontact import resolve
 
     cells = scenes.colony_2d(400, seed=1)
     real = qp._solve_block

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import qpcontact as qc
-from qpcontact.contacts import candidate_pairs, colliding, narrow_phase
+from qpcontact.geometry.contacts import candidate_pairs, colliding, narrow_phase
 from qpcontact.errors import InvalidArgumentError
 
 from conftest import random_scene

@@ -6,8 +6,9 @@ from pathlib import Path
 import numpy as np
 
 import qpcontact as qc
-from qpcontact import cli, demo
-from qpcontact.qp import formulations_of
+from qpcontact import cli
+from qpcontact.studies import demo
+from qpcontact.solvers.qpsolvers_bridge import formulations_of
 
 ROOT = Path(__file__).resolve().parents[1]
 

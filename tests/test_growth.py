@@ -5,8 +5,8 @@ import pytest
 
 import qpcontact as q
 from qpcontact.errors import InvalidArgumentError
-from qpcontact.growth import Colony, divide, grow, volumes
-from qpcontact.snapshots import load_colony, save_colony
+from qpcontact.colony.growth import Colony, divide, grow, volumes
+from qpcontact.colony.snapshots import load_colony, save_colony
 
 
 def one_cell(length=2.0, **extra):
@@ -128,7 +128,7 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
     ({"position_correction": 1.5}, r"position_correction: must be in \[0, 1\]"),
 ])
 def test_simulate_settings_are_checked(change, message):
-    from qpcontact.simulate import Settings
+    from qpcontact.colony.simulate import Settings
 
     with pytest.raises(InvalidArgumentError, match=message):
         Settings(**change)

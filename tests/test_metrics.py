@@ -9,8 +9,10 @@ impulse ``λ = 2/(1/m_a + 1/m_b) = 1.5``. Scaled: with a single contact ``Ã = B
 import numpy as np
 import pytest
 
-from qpcontact import Cells, build_system, colliding, find_contacts, metrics
-from qpcontact.linear import solve_min_norm
+from qpcontact import Cells, build_system, colliding, find_contacts
+
+from qpcontact.resolve import metrics
+from qpcontact.solvers.linear import solve_min_norm
 
 M_A, M_B = 1.0, 3.0
 
@@ -108,7 +110,7 @@ def test_physics_sees_momentum_that_is_not_equal_and_opposite(head_on):
 def test_minimum_euclidean_norm_answer_breaks_momentum(head_on):
     """model.md: the minimum Euclidean-norm solution (CG on raw impulses) is not physical when
     masses differ; measured with the metrics (the W-norm answer conserves momentum)."""
-    from qpcontact.baselines import conjugate_gradient
+    from qpcontact.solvers.baselines import conjugate_gradient
 
     cells, system, y, _ = head_on
     euclid = conjugate_gradient(system, tol=1e-12, metric="euclidean")

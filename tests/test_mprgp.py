@@ -7,10 +7,11 @@ import pytest
 import scipy.sparse as sp
 
 import qpcontact as qc
-from qpcontact import metrics, scenes
+from qpcontact.resolve import metrics
+from qpcontact.studies import scenes
 from qpcontact.errors import InvalidArgumentError, SolverFailedError
-from qpcontact.mprgp import mprgp
-from qpcontact.validation import reference_solution
+from qpcontact.solvers.mprgp import mprgp
+from qpcontact.resolve.validation import reference_solution
 
 from conftest import random_scene
 

@@ -4,7 +4,9 @@ solve."""
 import numpy as np
 import pytest
 
-from qpcontact import colliding, find_contacts, scenes
+from qpcontact import colliding, find_contacts
+
+from qpcontact.studies import scenes
 from qpcontact.errors import InvalidArgumentError
 
 SMALL = {"two_rods": None, "rod_chain": 8, "rod_across_many": 7, "jammed_packing": 19, "colony_2d": 300, "colony_3d": 300}

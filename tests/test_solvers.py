@@ -7,9 +7,9 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import qpcontact as qc
-from qpcontact.contacts import relative_normal_velocity
+from qpcontact.geometry.contacts import relative_normal_velocity
 from qpcontact.errors import InvalidArgumentError, SolverFailedError, SolverNotInstalledError, UnknownSolverError
-from qpcontact.qp import KNOWN_BACKENDS, formulations_of
+from qpcontact.solvers.qpsolvers_bridge import KNOWN_BACKENDS, formulations_of
 
 from conftest import random_scene
 

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 import qpcontact as q
-from qpcontact import metrics
-from qpcontact.catalogue import CATALOGUE, hub, long_chain
-from qpcontact.stability import KKT_LIMIT, check, main, prepare
+from qpcontact.resolve import metrics
+from qpcontact.studies.catalogue import CATALOGUE, hub, long_chain
+from qpcontact.studies.stability import KKT_LIMIT, check, main, prepare
 
 #: Reduced sizes of the large cases.
 SMALL = {"hub_1000": {"n": 60}, "chain_10000": {"n": 200}}

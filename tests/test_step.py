@@ -5,8 +5,8 @@ import pytest
 
 import qpcontact as q
 from qpcontact.errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
-from qpcontact.growth import Colony, divide, grow
-from qpcontact.step import advance, rotate, step
+from qpcontact.colony.growth import Colony, divide, grow
+from qpcontact.colony.step import advance, rotate, step
 
 
 def rod_pair_end_to_end(gap=0.0):
@@ -108,7 +108,7 @@ def test_total_linear_momentum_stays_zero_in_inertial_colony():
 
 
 def test_largest_overlap_stays_bounded_over_a_2d_run_with_position_correction():
-    from qpcontact.simulate import Settings, run_colony
+    from qpcontact.colony.simulate import Settings, run_colony
 
     run = run_colony(Settings(cells=150), progress=False)
     assert not run.error
@@ -132,7 +132,7 @@ def test_contacts_that_do_not_collide_before_the_solve_must_still_be_in_the_syst
     """model.md puts only colliding (approaching) contacts into the system. Over a step that is
     not enough: A hits B, and B, touching C at rest (not approaching), is pushed into C unless
     the B–C contact is in the system too (``keep_separating``)."""
-    from qpcontact.contacts import relative_normal_velocity
+    from qpcontact.geometry.contacts import relative_normal_velocity
 
     cells = q.Cells(centers=[[0, 0, 0], [1.0, 0, 0], [2.0, 0, 0]], axes=[0, 1, 0], lengths=1.0, radii=0.5,
                     momenta=[[1.0, 0, 0], [0, 0, 0], [0, 0, 0]])
@@ -157,9 +157,9 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
     """A cell driven 1 µm towards a neighbour 0.5 µm away (beyond the 0.3 µm margin, so the
     contact is not in the step's system): the full step ends with half a diameter of overlap;
     with ``overlap_limit`` the step is retried with half the step, which ends touching."""
-    from qpcontact.growth import Colony
-    from qpcontact.simulate import Settings, grow_with_retries
-    from qpcontact.step import largest_overlap
+    from qpcontact.colony.growth import Colony
+    from qpcontact.colony.simulate import Settings, grow_with_retries
+    from qpcontact.colony.step import largest_overlap
 
     cells = q.Cells(centers=[[0, 0, 0], [1.5, 0, 0]], axes=[0, 1, 0], lengths=2.0, radii=0.5, growth_inertia=np.inf)
     colony = Colony.founder(cells, 0.0)

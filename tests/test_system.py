@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 import qpcontact as qc
-from qpcontact.contacts import colliding
+from qpcontact.geometry.contacts import colliding
 from qpcontact.errors import InvalidArgumentError
-from qpcontact.system import build_system
+from qpcontact.assembly.system import build_system
 
 from conftest import random_scene
 

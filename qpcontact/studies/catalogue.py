@@ -25,8 +25,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .cells import Cells
-from .contacts import Contacts, concatenate, find_contacts
+from ..geometry.cells import Cells
+from ..geometry.contacts import Contacts, concatenate, find_contacts
 
 #: Default radius and length of a rod [length units of the scene].
 RADIUS, LENGTH = 0.5, 2.0

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cells import Cells
-from .qp import OBJECTIVES
-from .system import ContactSystem
+from ..geometry.cells import Cells
+from ..solvers.qpsolvers_bridge import OBJECTIVES
+from ..assembly.system import ContactSystem
 
 
 def penetration(system: ContactSystem, y: np.ndarray) -> float:

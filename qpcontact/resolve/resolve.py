@@ -10,12 +10,12 @@ from typing import Any
 import numpy as np
 
 from . import metrics
-from .cells import Cells
-from .contacts import Contacts, colliding, find_contacts
-from .errors import InvalidArgumentError, SolverFailedError
-from .linear import solve_min_norm
-from .qp import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS, check_solver, solve_qp_system
-from .system import ContactSystem, build_system
+from ..geometry.cells import Cells
+from ..geometry.contacts import Contacts, colliding, find_contacts
+from ..errors import InvalidArgumentError, SolverFailedError
+from ..solvers.linear import solve_min_norm
+from ..solvers.qpsolvers_bridge import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS, check_solver, solve_qp_system
+from ..assembly.system import ContactSystem, build_system
 
 #: Default form per formulation (see qpcontact.qp; chosen from docs/solvers.md measurements).
 DEFAULT_FORM = {"complementarity": "contact", "least_squares": "primal"}

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InvalidArgumentError
-from .system import ContactSystem
+from ..errors import InvalidArgumentError
+from ..assembly.system import ContactSystem
 
 BASELINES = ("cg", "cg_euclidean", "bbpgd")
 

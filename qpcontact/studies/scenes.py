@@ -31,9 +31,9 @@ from typing import Callable
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .cells import Cells
-from .contacts import find_contacts
-from .errors import InvalidArgumentError
+from ..geometry.cells import Cells
+from ..geometry.contacts import find_contacts
+from ..errors import InvalidArgumentError
 
 #: Cell radius [µm] (E. coli).
 RADIUS = 0.5

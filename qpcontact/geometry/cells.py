@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import InvalidCellsError
+from ..errors import InvalidCellsError
 
 #: Largest deviation of ``|â|`` from 1 that is accepted (and then renormalized to the last bit).
 AXIS_UNIT_TOLERANCE = 1e-6

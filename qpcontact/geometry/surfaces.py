@@ -17,7 +17,7 @@ import numpy as np
 
 from .cells import Cells
 from .contacts import Contacts, concatenate, relative_normal_velocity
-from .errors import InvalidArgumentError
+from ..errors import InvalidArgumentError
 
 
 @dataclass(frozen=True)

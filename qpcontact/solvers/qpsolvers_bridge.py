@@ -38,10 +38,10 @@ import qpsolvers
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from .errors import InvalidArgumentError, SolverNotInstalledError, UnknownSolverError
+from ..errors import InvalidArgumentError, SolverNotInstalledError, UnknownSolverError
 from .linear import solve_min_norm
 from .mprgp import mprgp
-from .system import ContactSystem
+from ..assembly.system import ContactSystem
 
 FORMULATIONS = ("least_squares", "complementarity")
 FORMS = ("primal", "contact")

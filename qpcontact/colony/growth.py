@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from .cells import Cells
-from .errors import InvalidArgumentError
+from ..geometry.cells import Cells
+from ..errors import InvalidArgumentError
 from .step import StepResult, rotate, step
 
 

@@ -42,16 +42,16 @@ from typing import Any, Callable
 import numpy as np
 import qpsolvers
 
-from . import metrics
-from .baselines import BASELINES, solve_baseline
-from .cells import Cells
-from .contacts import colliding, find_contacts
-from .linear import solve_min_norm
-from .qp import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS
-from .resolve import ACCEPT_FACTOR, solve_system
+from ..resolve import metrics
+from ..solvers.baselines import BASELINES, solve_baseline
+from ..geometry.cells import Cells
+from ..geometry.contacts import colliding, find_contacts
+from ..solvers.linear import solve_min_norm
+from ..solvers.qpsolvers_bridge import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS
+from ..resolve.resolve import ACCEPT_FACTOR, solve_system
 from .scenes import make_scene
-from .system import ContactSystem, build_system
-from .validation import ACTIVE_THRESHOLD, reference_solution
+from ..assembly.system import ContactSystem, build_system
+from ..resolve.validation import ACTIVE_THRESHOLD, reference_solution
 
 #: A run is accurate when its distance to the reference is at most this many times the tolerance
 #: (with the floor ``ACCURACY_FLOOR``: the references themselves are good to about 1e-9).
@@ -171,7 +171,7 @@ def complementarity_reference(system: ContactSystem) -> tuple[np.ndarray, float]
 
 
 def solve_baseline_from(system: ContactSystem, initial: np.ndarray) -> tuple[np.ndarray, float] | None:
-    from .baselines import bbpgd
+    from ..solvers.baselines import bbpgd
 
     out = bbpgd(system, tol=1e-12, initial=initial, max_iterations=50_000, time_limit=60.0)
     return (out.y, out.residual) if out.converged else None

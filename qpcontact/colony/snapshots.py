@@ -35,8 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .cells import Cells
-from .errors import InvalidArgumentError
+from ..geometry.cells import Cells
+from ..errors import InvalidArgumentError
 from .growth import Colony
 
 FORMAT = "qpcontact-colony"

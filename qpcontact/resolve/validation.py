@@ -7,10 +7,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import metrics
-from .linear import LinearSolution, solve_min_norm
-from .qp import solve_qp_system
+from ..solvers.linear import LinearSolution, solve_min_norm
+from ..solvers.qpsolvers_bridge import solve_qp_system
 from .resolve import Result
-from .system import ContactSystem
+from ..assembly.system import ContactSystem
 
 #: Contact impulses below this (scaled) count as inactive in the linear solve.
 ACTIVE_THRESHOLD = 1e-9

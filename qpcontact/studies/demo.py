@@ -10,14 +10,14 @@ import argparse
 import time
 from pathlib import Path
 
-from . import metrics
-from .contacts import colliding, find_contacts
-from .errors import QPContactError
-from .qp import FORMULATIONS, available_solvers, formulations_of
-from .resolve import resolve
+from ..resolve import metrics
+from ..geometry.contacts import colliding, find_contacts
+from ..errors import QPContactError
+from ..solvers.qpsolvers_bridge import FORMULATIONS, available_solvers, formulations_of
+from ..resolve.resolve import resolve
 from .scenes import colony_2d, colony_3d
-from .system import build_system
-from .validation import reference_solution
+from ..assembly.system import build_system
+from ..resolve.validation import reference_solution
 
 COLUMNS = ("solver", "formulation", "status", "ok", "total ms", "solve ms", "penetration", "distance", "momentum", "ΔKE/KE_imp")
 

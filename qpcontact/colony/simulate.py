@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from .cells import Cells
-from .errors import InvalidArgumentError, QPContactError, SolverFailedError
+from ..geometry.cells import Cells
+from ..errors import InvalidArgumentError, QPContactError, SolverFailedError
 from .growth import Colony, divide, expansion_time_step, grow
 from .snapshots import load_colony, save_colony
 from .step import largest_overlap
-from .surfaces import substrate
+from ..geometry.surfaces import substrate
 
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
                   "step_seconds", "penetration", "complementarity", "rejected")

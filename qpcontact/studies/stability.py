@@ -51,16 +51,16 @@ from typing import Any
 
 import numpy as np
 
-from . import metrics
+from ..resolve import metrics
 from .catalogue import CATALOGUE, Case
-from .cells import Cells
-from .contacts import Contacts, colliding, find_contacts
-from .errors import QPContactError
-from .linear import solve_min_norm
-from .qp import FORMULATIONS, available_solvers
-from .resolve import DEFAULT_FORM, resolve
-from .system import ContactSystem, build_system
-from .validation import reference_solution
+from ..geometry.cells import Cells
+from ..geometry.contacts import Contacts, colliding, find_contacts
+from ..errors import QPContactError
+from ..solvers.linear import solve_min_norm
+from ..solvers.qpsolvers_bridge import FORMULATIONS, available_solvers
+from ..resolve.resolve import DEFAULT_FORM, resolve
+from ..assembly.system import ContactSystem, build_system
+from ..resolve.validation import reference_solution
 
 #: Solver tolerance of every run (dimensionless).
 TOLERANCE = 1e-6
@@ -229,7 +229,7 @@ def guarded(prep: Prepared, solver: str, formulation: str, form: str, scale: boo
     # references) can deadlock on the inherited thread pool (measured: 20 s guard hit on a solve
     # that takes 0.08 s in a fresh process).
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["qpcontact.stability"])
+    ctx.set_forkserver_preload(["qpcontact.studies.stability"])
     parent, child = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(child, prep, (solver, formulation, form, scale, time_limit, repeats)))
     t0 = time.perf_counter()

@@ -21,7 +21,7 @@ import numpy as np  # noqa: E402
 from matplotlib.animation import FuncAnimation, PillowWriter  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 
-from .cells import Cells  # noqa: E402
+from ..geometry.cells import Cells  # noqa: E402
 
 #: Points per semicircular cap of a drawn capsule.
 CAP_POINTS = 8

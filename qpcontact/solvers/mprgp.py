@@ -39,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .baselines import IterativeSolution, check_options
-from .errors import InvalidArgumentError
+from ..errors import InvalidArgumentError
 
 #: Power iterations for the estimate of ‖Ã‖ behind the expansion step.
 POWER_ITERATIONS = 10

@@ -24,7 +24,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .cells import Cells, perpendicular_basis
-from .errors import InvalidArgumentError
+from ..errors import InvalidArgumentError
 
 #: Pairs whose axes make an angle with sine below this get two contacts (ends of the overlap).
 PARALLEL_SINE = 1e-3

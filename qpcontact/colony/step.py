@@ -31,11 +31,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .cells import Cells
-from .contacts import Contacts, concatenate, find_contacts, required_velocity_change
-from .errors import InvalidArgumentError, InvalidCellsError
-from .resolve import Result, resolve
-from .surfaces import plane_contacts
+from ..geometry.cells import Cells
+from ..geometry.contacts import Contacts, concatenate, find_contacts, required_velocity_change
+from ..errors import InvalidArgumentError, InvalidCellsError
+from ..resolve.resolve import Result, resolve
+from ..geometry.surfaces import plane_contacts
 
 DYNAMICS = ("overdamped", "inertial")
 #: Contacts separating faster than this many times the largest collision are left out

@@ -48,14 +48,16 @@ from typing import Any, Callable
 
 import numpy as np
 
-from . import metrics, scenes
-from .baselines import BASELINES, solve_baseline
-from .cells import Cells
-from .contacts import colliding, find_contacts
-from .linear import solve_min_norm
-from .resolve import solve_system
-from .system import ContactSystem, build_system
-from .validation import active_set_polish, reference_solution
+from ..resolve import metrics
+
+from . import scenes
+from ..solvers.baselines import BASELINES, solve_baseline
+from ..geometry.cells import Cells
+from ..geometry.contacts import colliding, find_contacts
+from ..solvers.linear import solve_min_norm
+from ..resolve.resolve import solve_system
+from ..assembly.system import ContactSystem, build_system
+from ..resolve.validation import active_set_polish, reference_solution
 
 #: Solver specs ``name[/form]`` timed by default: the floor, the baseline, and the QP backends.
 DEFAULT_SOLVERS = ("linear", "linear/lsmr", "cg@1e-8", "mprgp", "osqp/contact", "osqp/primal", "clarabel/primal@1e-9")
@@ -479,7 +481,7 @@ def main(argv: list[str] | None = None) -> int:
             t0 = time.perf_counter()
             skipped = _too_slow(previous, n, args.solvers, args.slow_limit)
             run = [spec for spec in args.solvers if spec not in skipped]
-            proc = subprocess.run([sys.executable, "-m", "qpcontact.bench", "--worker", str(dim), str(n), *common,
+            proc = subprocess.run([sys.executable, "-m", "qpcontact.studies.bench", "--worker", str(dim), str(n), *common,
                                    "--solvers", *run], capture_output=True, text=True)
             if proc.returncode != 0:
                 print(proc.stderr, file=sys.stderr)

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .errors import SolverFailedError
+from ..errors import SolverFailedError
 
 
 @dataclass
