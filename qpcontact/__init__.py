@@ -1,10 +1,17 @@
 """qpcontact: contact resolution between capsule cells as a constrained quadratic program.
 
-Data flow: :class:`Cells` → :func:`find_contacts` / :func:`colliding` → :func:`build_system` →
-:func:`resolve` (plain linear solve or a QP through qpsolvers) → :class:`Result`.
+Data flow, one wing each (a wing imports only from itself and the wings before it):
+:mod:`~qpcontact.geometry` (:class:`Cells` → :func:`find_contacts` / :func:`colliding`) →
+:mod:`~qpcontact.assembly` (:func:`build_system`) → :mod:`~qpcontact.solvers` (one registry:
+the plain linear solve, MPRGP, every qpsolvers backend) → :mod:`~qpcontact.resolve`
+(:func:`resolve`, one call per step, every answer checked → :class:`Result`) →
+:mod:`~qpcontact.colony` (:func:`step`, :func:`grow`, :class:`Colony`, snapshots). The studies
+(:mod:`qpcontact.studies`: scenes, catalogue, comparison, stability, benchmark, demo) sit on
+top and are not imported here. docs/architecture.md describes the layout.
 """
 
-from .assembly.system import ContactSystem, build_system
+from .assembly import ContactSystem, build_system
+from .colony import Colony, StepResult, divide, expansion_time_step, grow, load_colony, save_colony, step
 from .errors import (
     InvalidArgumentError,
     InvalidCellsError,
@@ -13,16 +20,17 @@ from .errors import (
     SolverNotInstalledError,
     UnknownSolverError,
 )
-from .geometry.cells import Cells
-from .geometry.contacts import Contacts, colliding, concatenate, find_contacts
+from .geometry import Cells, Contacts, Plane, channel, colliding, concatenate, find_contacts, plane_contacts, substrate
 from .resolve import Agreement, Result, compare_with_linear, reference_solution, resolve, solve_system
-from .solvers.qpsolvers_bridge import FORMULATIONS, available_solvers
+from .solvers import FORMS, FORMULATIONS, SolverSpec, available_solvers, get_solver
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "Agreement", "Cells", "ContactSystem", "Contacts", "FORMULATIONS", "InvalidArgumentError", "InvalidCellsError",
-    "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError", "UnknownSolverError",
-    "available_solvers", "build_system", "colliding", "compare_with_linear", "concatenate", "find_contacts",
-    "reference_solution", "resolve", "solve_system",
+    "FORMS", "FORMULATIONS", "Agreement", "Cells", "Colony", "ContactSystem", "Contacts", "InvalidArgumentError",
+    "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
+    "SolverSpec", "StepResult", "UnknownSolverError", "available_solvers", "build_system", "channel", "colliding",
+    "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
+    "load_colony", "plane_contacts", "reference_solution", "resolve", "save_colony", "solve_system", "step",
+    "substrate",
 ]

@@ -14,7 +14,7 @@ import scipy.sparse as sp
 import qpcontact as qc
 from qpcontact.studies import bench
 from qpcontact.resolve import metrics
-from qpcontact.solvers import qpsolvers_bridge as qp
+from qpcontact.solvers import Problem, blocks, solve
 from qpcontact.studies import scenes
 from qpcontact.geometry.contacts import candidate_pairs, narrow_phase
 from qpcontact.assembly.system import slot_basis, slot_directions
@@ -125,15 +125,15 @@ def _many_components():
 def test_independent_blocks_partition_the_system_into_uncoupled_parts():
     _, system = _many_components()
     k, n = system.shape
-    blocks = qp.independent_blocks(system.matrix)
-    assert len(blocks) > 3
-    rows = np.concatenate([r for r, _ in blocks])
-    cols = np.concatenate([c for _, c in blocks])
+    parts = blocks.independent_blocks(system.matrix)
+    assert len(parts) > 3
+    rows = np.concatenate([r for r, _ in parts])
+    cols = np.concatenate([c for _, c in parts])
     assert np.array_equal(np.sort(rows), np.arange(k)) and np.array_equal(np.sort(cols), np.arange(n))
     coo = sp.coo_matrix(system.matrix)
-    merged = qp.independent_blocks(system.matrix, min_rows=k // 3)
-    assert 1 < len(merged) < len(blocks)
-    for partition in (blocks, merged):
+    merged = blocks.independent_blocks(system.matrix, min_rows=k // 3)
+    assert 1 < len(merged) < len(parts)
+    for partition in (parts, merged):
         row_block, col_block = np.empty(k, int), np.empty(n, int)
         for i, (r, c) in enumerate(partition):
             row_block[r], col_block[c] = i, i
@@ -145,9 +145,9 @@ def test_independent_blocks_partition_the_system_into_uncoupled_parts():
 def test_split_solve_equals_the_unsplit_solve(solver, form, formulation, monkeypatch):
     _, system = _many_components()
     reference = qc.reference_solution(system, formulation)
-    monkeypatch.setattr(qp, "BLOCK_ROWS", 50)
-    split = qp.solve_qp_system(system, solver, formulation, form, tolerance=1e-8, split=True)
-    whole = qp.solve_qp_system(system, solver, formulation, form, tolerance=1e-8, split=False)
+    monkeypatch.setattr(blocks, "BLOCK_ROWS", 50)
+    split = solve(Problem.of(system), solver, formulation, form, tolerance=1e-8, split=True)
+    whole = solve(Problem.of(system), solver, formulation, form, tolerance=1e-8, split=False)
     assert split.found and whole.found and split.extras["blocks"] > 1
     assert metrics.distance(split.y, whole.y) < 1e-4
     # as accurate as the unsplit solve (Clarabel's ỹ is only ~1e-5 accurate at tolerance 1e-8)

@@ -13,7 +13,9 @@ from qpcontact.resolve import metrics
 
 from qpcontact.studies import scenes
 from qpcontact.studies import compare
-from qpcontact.solvers.baselines import bbpgd, conjugate_gradient, solve_baseline
+from qpcontact.errors import UnknownSolverError
+from qpcontact.solvers import Problem, solve
+from qpcontact.solvers.baselines import bbpgd, conjugate_gradient
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.solvers.linear import solve_min_norm
 
@@ -88,8 +90,8 @@ def test_shifted_geometric_mean():
 
 def test_cg_converges_to_the_plain_linear_solve(colony):
     _, system = colony
-    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-13)
-    out = conjugate_gradient(system, tol=1e-10)
+    lin = solve_min_norm(system.matrix, system.rhs, tolerance=1e-13)
+    out = conjugate_gradient(system.matrix, system.rhs, tolerance=1e-10)
     assert out.converged and out.status == "converged" and out.iterations > 1
     assert metrics.distance(out.y, lin.y) < 1e-8
     assert metrics.distance(out.y, reference_solution(system, "least_squares")) < 1e-8
@@ -98,52 +100,54 @@ def test_cg_converges_to_the_plain_linear_solve(colony):
 def test_bbpgd_converges_to_the_complementarity_answer(colony):
     _, system = colony
     reference = reference_solution(system, "complementarity")
-    out = bbpgd(system, tol=1e-10)
+    out = bbpgd(system.matrix, system.rhs, tolerance=1e-10)
     assert out.converged and np.all(out.lam >= 0)
     assert metrics.complementarity_residual(system, out.y, out.lam) <= 1e-10
     assert metrics.distance(out.y, reference) < 1e-7
     # The complementarity answer differs from the plain solve here (the plain solve pulls).
-    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-13)
+    lin = solve_min_norm(system.matrix, system.rhs, tolerance=1e-13)
     assert np.any(lin.lam < 0) and metrics.distance(out.y, lin.y) > 1e-4
 
 
 @pytest.mark.parametrize("name", ["cg", "cg_euclidean", "bbpgd"])
 def test_baselines_report_non_convergence(colony, name):
     _, system = colony
-    out = solve_baseline(system, name, tolerance=1e-12, max_iterations=2)
-    assert not out.converged and out.status == "max_iterations" and out.iterations == 2
-    assert out.residual > 1e-12
+    out = solve(Problem.of(system), name, tolerance=1e-12, settings={"max_iterations": 2})
+    assert not out.found and out.status == "max_iterations" and out.iterations == 2
+    assert out.extras["residual"] > 1e-12
 
 
 def test_baseline_arguments_are_checked(colony):
     _, system = colony
-    with pytest.raises(InvalidArgumentError, match="tol"):
-        bbpgd(system, tol=0.0)
+    with pytest.raises(InvalidArgumentError, match="tolerance"):
+        bbpgd(system.matrix, system.rhs, tolerance=0.0)
     with pytest.raises(InvalidArgumentError, match="metric"):
-        conjugate_gradient(system, metric="L1")
-    with pytest.raises(InvalidArgumentError, match="unknown baseline"):
-        solve_baseline(system, "pgs", tolerance=1e-6)
+        conjugate_gradient(system.matrix, system.rhs, metric="L1")
+    with pytest.raises(UnknownSolverError, match="unknown solver 'pgs'"):
+        solve(Problem.of(system), "pgs", tolerance=1e-6)
 
 
 def test_a_failed_block_gives_no_partial_answer(monkeypatch):
-    """qp.solve_qp_system splits independent components into blocks; when one block fails, the
+    """solve_by_blocks splits independent components into blocks; when one block fails, the
     outcome must carry no ỹ (a block's ỹ has only its own columns: resolve crashed on it)."""
-    from qpcontact.solvers import qpsolvers_bridge as qp
+    import dataclasses
+
     from qpcontact import resolve
+    from qpcontact.solvers import blocks, get_solver, registry
 
     cells = scenes.colony_2d(400, seed=1)
-    real = qp._solve_block
+    real = get_solver("osqp")
     calls = []
 
-    def second_block_fails(B, rhs, *args, **kwargs):
-        out = real(B, rhs, *args, **kwargs)
-        calls.append(B.shape)
+    def second_block_fails(problem, *args, **kwargs):
+        out = real.solve(problem, *args, **kwargs)
+        calls.append(problem.shape)
         if len(calls) == 2:
             out.found, out.status = False, "made to fail"
         return out
 
-    monkeypatch.setattr(qp, "BLOCK_ROWS", 50)
-    monkeypatch.setattr(qp, "_solve_block", second_block_fails)
+    monkeypatch.setattr(blocks, "BLOCK_ROWS", 50)
+    monkeypatch.setitem(registry._SOLVERS, "osqp", dataclasses.replace(real, solve=second_block_fails))
     result = resolve(cells, solver="osqp", on_failure="return")
     assert len(calls) == 2 and not result.converged
     assert "made to fail" in result.status and result.scaled_solution is None
@@ -162,5 +166,5 @@ def test_plain_right_hand_side_is_always_consistent(name, n):
     assert system.shape[0] > system.shape[1] or name != "jammed_packing"
     stop_all = system.from_impulses(-cells.generalized_momenta())
     assert metrics.penetration(system, stop_all) < 1e-12
-    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-10)
+    lin = solve_min_norm(system.matrix, system.rhs, tolerance=1e-10)
     assert lin.consistent and metrics.penetration(system, lin.y) < 1e-10

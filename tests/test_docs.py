@@ -8,7 +8,6 @@ import numpy as np
 import qpcontact as qc
 from qpcontact import cli
 from qpcontact.studies import demo
-from qpcontact.solvers.qpsolvers_bridge import formulations_of
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -27,7 +26,7 @@ def test_demo_prints_a_row_per_solver_and_formulation(tmp_path, capsys):
     assert cli.main(["demo", "--cells", "60", "--out", str(out)]) == 0
     text = out.read_text()
     rows = [line for line in text.splitlines() if line.startswith("| ") and not line.startswith("| solver")]
-    expected = sum(len(formulations_of(solver)) for solver in qc.available_solvers())
+    expected = sum(len(qc.get_solver(solver).formulations) for solver in qc.available_solvers())
     assert len(rows) == expected
     assert all("| yes |" in row for row in rows if row.split("|")[1].strip() in ("linear", "mprgp", "osqp", "clarabel"))
     assert "colliding contacts" in capsys.readouterr().out

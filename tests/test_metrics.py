@@ -25,7 +25,7 @@ def head_on():
     )
     active, b = colliding(find_contacts(cells))
     system = build_system(cells, active, b)
-    exact = solve_min_norm(system.matrix, system.rhs, tol=1e-14)
+    exact = solve_min_norm(system.matrix, system.rhs, tolerance=1e-14)
     return cells, system, exact.y, exact.lam
 
 
@@ -113,7 +113,8 @@ def test_minimum_euclidean_norm_answer_breaks_momentum(head_on):
     from qpcontact.solvers.baselines import conjugate_gradient
 
     cells, system, y, _ = head_on
-    euclid = conjugate_gradient(system, tol=1e-12, metric="euclidean")
+    euclid = conjugate_gradient(system.matrix, system.rhs, tolerance=1e-12, metric="euclidean",
+                                column_inverse_mass=system.column_inverse_mass)
     assert euclid.converged
     assert metrics.penetration(system, euclid.y) == pytest.approx(0.0, abs=1e-12)  # still stops the approach
     out = metrics.physics(cells, system, system.to_impulses(euclid.y), None)

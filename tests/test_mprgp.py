@@ -29,7 +29,7 @@ def system_of(cells):
 def test_mprgp_reaches_the_complementarity_optimum(scene):
     system = system_of(scene())
     reference = reference_solution(system, "complementarity")
-    out = mprgp(system.matrix, system.rhs, tol=1e-9)
+    out = mprgp(system.matrix, system.rhs, tolerance=1e-9)
     assert out.converged and out.status == "converged" and out.residual <= 1e-9
     assert metrics.distance(out.y, reference) < 1e-6
     assert np.all(out.lam >= 0)
@@ -55,22 +55,22 @@ def test_row_scaling_does_not_change_the_answer():
     inside makes the solver see the same problem."""
     system = system_of(scenes.colony_3d(300, 0))
     d = np.random.default_rng(0).uniform(1e-3, 1e3, system.matrix.shape[0])
-    plain = mprgp(system.matrix, system.rhs, tol=1e-10)
-    scaled = mprgp(sp.diags(d) @ system.matrix, d * system.rhs, tol=1e-10 * d.min())
+    plain = mprgp(system.matrix, system.rhs, tolerance=1e-10)
+    scaled = mprgp(sp.diags(d) @ system.matrix, d * system.rhs, tolerance=1e-10 * d.min())
     assert scaled.converged
     assert metrics.distance(scaled.y, plain.y) < 1e-7
 
 
 def test_a_warm_start_at_the_answer_needs_no_iteration():
     system = system_of(scenes.colony_2d(200, 0))
-    first = mprgp(system.matrix, system.rhs, tol=1e-8)
-    again = mprgp(system.matrix, system.rhs, tol=1e-8, initial=first.lam)
+    first = mprgp(system.matrix, system.rhs, tolerance=1e-8)
+    again = mprgp(system.matrix, system.rhs, tolerance=1e-8, initial=first.lam)
     assert again.converged and again.iterations == 0
 
 
 def test_an_unfinished_solve_is_reported_and_never_applied():
     cells = scenes.colony_3d(300, 0)
-    out = mprgp(system_of(cells).matrix, system_of(cells).rhs, tol=1e-10, max_iterations=3)
+    out = mprgp(system_of(cells).matrix, system_of(cells).rhs, tolerance=1e-10, max_iterations=3)
     assert not out.converged and out.status == "max_iterations" and out.iterations == 3 and out.residual > 1e-10
     with pytest.raises(SolverFailedError, match="mprgp did not converge"):
         qc.resolve(cells, solver="mprgp", solver_settings={"max_iterations": 3})
@@ -80,7 +80,7 @@ def test_an_unfinished_solve_is_reported_and_never_applied():
 
 def test_zero_rows_are_empty_or_infeasible():
     matrix = sp.csr_matrix(np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 2.0]]))
-    ok = mprgp(matrix, np.array([1.0, -0.5, 1.0]), tol=1e-12)
+    ok = mprgp(matrix, np.array([1.0, -0.5, 1.0]), tolerance=1e-12)
     assert ok.converged and ok.lam[1] == 0 and np.allclose(ok.y, [1.0, 0.5])
     bad = mprgp(matrix, np.array([1.0, 0.5, 1.0]))
     assert not bad.converged and bad.status == "infeasible"
@@ -96,5 +96,5 @@ def test_mprgp_takes_only_the_complementarity_formulation_and_its_own_settings()
         qc.resolve(cells, solver="mprgp", solver_settings={"eps_abs": 1e-3})
     with pytest.raises(InvalidArgumentError, match="proportioning"):
         qc.resolve(cells, solver="mprgp", solver_settings={"proportioning": -1.0})
-    with pytest.raises(InvalidArgumentError, match="tol"):
-        mprgp(sp.eye(2, format="csr"), np.ones(2), tol=0.0)
+    with pytest.raises(InvalidArgumentError, match="tolerance"):
+        mprgp(sp.eye(2, format="csr"), np.ones(2), tolerance=0.0)

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 import qpcontact as qc
 from qpcontact.geometry.contacts import relative_normal_velocity
 from qpcontact.errors import InvalidArgumentError, SolverFailedError, SolverNotInstalledError, UnknownSolverError
-from qpcontact.solvers.qpsolvers_bridge import KNOWN_BACKENDS, formulations_of
+from qpcontact.solvers.qpsolvers_bridge import KNOWN_BACKENDS
 
 from conftest import random_scene
 
@@ -62,7 +62,7 @@ def test_two_capsules_get_the_textbook_inelastic_impulse(solver, tilt):
     assert post_velocity(result)[0] == pytest.approx(0.0, abs=1e-5 * abs(result.contacts.normal_velocity[0]))
 
 
-@pytest.mark.parametrize("solver, formulation", [(s, f) for s in qc.available_solvers() for f in formulations_of(s)])
+@pytest.mark.parametrize("solver, formulation", [(s, f) for s in qc.available_solvers() for f in qc.get_solver(s).formulations])
 @pytest.mark.parametrize("seed", range(3))
 def test_invariants_after_every_solve(solver, formulation, seed):
     cells = random_scene(seed, n=40)
@@ -90,7 +90,7 @@ def test_qp_equals_the_linear_solve_when_all_contacts_are_active(seed, n, planar
     reference = linear.impulses
     scale = np.max(np.abs(reference))
     for solver in ("osqp", "clarabel", "mprgp"):
-        for formulation in formulations_of(solver):
+        for formulation in qc.get_solver(solver).formulations:
             result = qc.resolve(cells, solver=solver, formulation=formulation, tolerance=1e-9)
             agreement = qc.compare_with_linear(result, tolerance=1e-4)
             assert agreement.all_active, (solver, formulation)

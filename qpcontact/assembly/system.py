@@ -115,10 +115,6 @@ class ContactSystem:
         """``(K, n)``: contact rows, unknowns."""
         return self.matrix.shape
 
-    def delassus(self) -> sp.csc_matrix:
-        """The scaled Delassus operator ``Ã = B̃ B̃ᵀ`` (K × K, symmetric positive semidefinite)."""
-        return (self.matrix @ self.matrix.T).tocsc()
-
     def to_impulses(self, y: np.ndarray) -> np.ndarray:
         """(N, 7) physical impulses ``(Δp, ΔL, Δg)`` from scaled unknowns ``ỹ``."""
         w = self.column_inverse_mass

@@ -40,6 +40,7 @@ from .growth import Colony, divide, expansion_time_step, grow
 from .snapshots import load_colony, save_colony
 from .step import largest_overlap
 from ..geometry.surfaces import substrate
+from ..solvers import FORMS, QP_FORMULATIONS, available_solvers
 
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
                   "step_seconds", "penetration", "complementarity", "rejected")
@@ -241,9 +242,10 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--cells", type=int, default=d.cells, help="grow until the colony has this many cells")
     p.add_argument("--dimensions", type=int, choices=(2, 3), default=d.dimensions,
                    help="2: monolayer in the xy-plane (planar unknowns only); 3: a biofilm on a substrate plane z = 0")
-    p.add_argument("--solver", default=d.solver, help="'linear' or an installed qpsolvers backend")
-    p.add_argument("--formulation", default=d.formulation, choices=("complementarity", "least_squares"))
-    p.add_argument("--form", default=d.form, choices=("auto", "primal", "contact"))
+    p.add_argument("--solver", default=d.solver, help=f"an installed solver: {', '.join(available_solvers())}")
+    p.add_argument("--formulation", default=d.formulation, choices=QP_FORMULATIONS,
+                   help="QP formulation (a plain solver such as 'linear' solves the plain problem)")
+    p.add_argument("--form", default=d.form, choices=("auto", *FORMS))
     p.add_argument("--tolerance", type=float, default=d.tolerance, help="solver tolerance (dimensionless)")
     p.add_argument("--position-correction", type=float, default=d.position_correction,
                    help="β: fraction of each overlap cleared per step (0 = off)")

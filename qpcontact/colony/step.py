@@ -34,7 +34,8 @@ import numpy as np
 from ..geometry.cells import Cells
 from ..geometry.contacts import Contacts, concatenate, find_contacts, required_velocity_change
 from ..errors import InvalidArgumentError, InvalidCellsError
-from ..resolve.resolve import Result, resolve
+from ..resolve import Result, resolve
+from ..solvers import get_solver
 from ..geometry.surfaces import plane_contacts
 
 DYNAMICS = ("overdamped", "inertial")
@@ -220,8 +221,9 @@ def step(
         if out_of_plane.any():
             raise InvalidCellsError(f"planar=True, but cell {int(np.flatnonzero(out_of_plane)[0])} is not in the plane of cell 0")
     if keep_separating is None:
-        defaults = {**resolve.__kwdefaults__, **resolve_options}
-        keep_separating = defaults["solver"] != "linear" and defaults["formulation"] == "complementarity"
+        defaults = {**(resolve.__kwdefaults__ or {}), **resolve_options}
+        planned, _ = get_solver(defaults["solver"]).plan(defaults["formulation"], defaults["form"])
+        keep_separating = planned == "complementarity"
     moving = momenta_before_contact(cells, dt, dynamics, drive, damping)
     contacts = concatenate([find_contacts(moving, margin, planar=bool(planar), parallel_sine=parallel_sine),
                             plane_contacts(moving, planes, margin)])

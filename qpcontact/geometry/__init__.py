@@ -1,1 +1,30 @@
-"""geometry wing."""
+"""Geometry: the cells, the contacts between them and with static planes.
+
+The lowest wing: it imports nothing of qpcontact but :mod:`qpcontact.errors`.
+
+- :mod:`.cells`: :class:`Cells`, N capsules as arrays (positions, shapes, masses, momenta);
+- :mod:`.contacts`: :func:`find_contacts` (KD-tree broad phase, vectorized segment narrow
+  phase), :class:`Contacts`, :func:`colliding` (the contacts to resolve and their ``b``);
+- :mod:`.surfaces`: static planes (:class:`Plane`, :func:`substrate`, :func:`channel`) as
+  one-sided contacts (:func:`plane_contacts`).
+"""
+
+from .cells import Cells, perpendicular_basis
+from .contacts import (
+    PARALLEL_SINE,
+    Contacts,
+    candidate_pairs,
+    colliding,
+    concatenate,
+    find_contacts,
+    narrow_phase,
+    relative_normal_velocity,
+    required_velocity_change,
+)
+from .surfaces import Plane, channel, plane_contacts, substrate
+
+__all__ = [
+    "PARALLEL_SINE", "Cells", "Contacts", "Plane", "candidate_pairs", "channel",
+    "colliding", "concatenate", "find_contacts", "narrow_phase", "perpendicular_basis",
+    "plane_contacts", "relative_normal_velocity", "required_velocity_change", "substrate",
+]

@@ -1,6 +1,22 @@
-"""resolve wing."""
+"""Resolve: one call per timestep, and the checks of every answer.
 
-from .resolve import Result, resolve, solve_system
-from .validation import Agreement, compare_with_linear, reference_solution
+- :mod:`.resolve`: :func:`resolve` (find the colliding contacts, assemble, solve through the
+  solver registry, check, return a :class:`Result`), :func:`solve_system` (solve an assembled
+  system and apply the acceptance checks);
+- :mod:`.metrics`: the dimensionless error measures of model.md;
+- :mod:`.validation`: high-accuracy references (:func:`reference_solution`) and the comparison
+  with the plain solve (:func:`compare_with_linear`).
 
-__all__ = ["Agreement", "Result", "compare_with_linear", "reference_solution", "resolve", "solve_system"]
+Imports the geometry, assembly and solvers wings only. ``qpcontact.resolve`` itself is the
+function (re-exported at the top level); import the modules with
+``from qpcontact.resolve import metrics``.
+"""
+
+from . import metrics
+from .resolve import ACCEPT_FACTOR, Result, acceptance_failure, resolve, solve_system
+from .validation import ACTIVE_THRESHOLD, Agreement, active_set_polish, compare_with_linear, reference_solution
+
+__all__ = [
+    "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Result", "acceptance_failure", "active_set_polish",
+    "compare_with_linear", "metrics", "reference_solution", "resolve", "solve_system",
+]

@@ -1,17 +1,31 @@
 """Error measures of model.md, all dimensionless and unit-invariant.
 
-Scaled quantities (``ỹ``, ``λ̃``, ``B̃``, ``b̃``) come from :class:`qpcontact.system.ContactSystem`;
+Scaled quantities (``ỹ``, ``λ̃``, ``B̃``, ``b̃``) come from :class:`qpcontact.assembly.ContactSystem`;
 ``max|b̃| = 1`` and the mean diagonal of ``Ã = B̃B̃ᵀ`` is 1, so velocities and impulses are both
 of order one there.
 """
 
 from __future__ import annotations
 
+from typing import Callable
+
 import numpy as np
 
-from ..geometry.cells import Cells
-from ..solvers.qpsolvers_bridge import OBJECTIVES
 from ..assembly.system import ContactSystem
+from ..geometry.cells import Cells
+
+
+def _least_squares_objective(system: ContactSystem, y: np.ndarray) -> float:
+    return 0.5 * float(np.sum((system.matrix @ y - system.rhs) ** 2))
+
+
+#: Objective of each formulation in scaled units, as a function of (system, ỹ). The plain
+#: problem ("linear") is the least-squares fit of B̃ỹ = b̃ without the constraint.
+OBJECTIVES: dict[str, Callable[[ContactSystem, np.ndarray], float]] = {
+    "complementarity": lambda system, y: 0.5 * float(y @ y),
+    "least_squares": _least_squares_objective,
+    "linear": _least_squares_objective,
+}
 
 
 def penetration(system: ContactSystem, y: np.ndarray) -> float:

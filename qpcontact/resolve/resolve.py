@@ -9,18 +9,16 @@ from typing import Any
 
 import numpy as np
 
-from . import metrics
+from ..assembly.system import ContactSystem, build_system
+from ..errors import InvalidArgumentError, SolverFailedError
 from ..geometry.cells import Cells
 from ..geometry.contacts import Contacts, colliding, find_contacts
-from ..errors import InvalidArgumentError, SolverFailedError
-from ..solvers.linear import solve_min_norm
-from ..solvers.qpsolvers_bridge import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS, check_solver, solve_qp_system
-from ..assembly.system import ContactSystem, build_system
+from ..solvers import FORMS, FORMULATIONS, Problem, get_solver, solve, solve_min_norm
+from ..solvers.registry import check_options
+from . import metrics
 
-#: Default form per formulation (see qpcontact.qp; chosen from docs/solvers.md measurements).
-DEFAULT_FORM = {"complementarity": "contact", "least_squares": "primal"}
-#: A QP answer is accepted when its penetration (and, for complementarity, its relative duality
-#: gap) is at most this many times the tolerance.
+#: A QP answer is accepted when each measure of :func:`acceptance_failure` is at most this many
+#: times the tolerance.
 ACCEPT_FACTOR = 100.0
 
 
@@ -42,7 +40,7 @@ class Result:
         iterations: solver iterations where known.
         times: seconds per phase: ``detect``, ``assemble``, ``setup``, ``solve``, ``check``,
             ``total``.
-        errors: dimensionless error measures (see :mod:`qpcontact.metrics`): ``penetration``,
+        errors: dimensionless error measures (see :mod:`qpcontact.resolve.metrics`): ``penetration``,
             ``complementarity`` and ``duality_gap`` (complementarity formulation), ``multiplier_consistency``,
             ``momentum_change``, ``angular_momentum_change``, ``energy_change``,
             ``energy_change_relative``.
@@ -82,26 +80,68 @@ class Result:
         )
 
 
-def _check_options(solver: str, formulation: str, form: str, tolerance: float, time_limit: float | None, on_failure: str) -> None:
-    check_solver(solver)
+def _check_options(solver: str, formulation: str, form: str, tolerance: float, time_limit: float | None,
+                   on_failure: str) -> tuple[str, str]:
+    """Named errors for bad arguments; returns the ``(formulation, form)`` the solver solves."""
+    spec = get_solver(solver)
     if formulation not in FORMULATIONS:
         raise InvalidArgumentError(f"formulation: expected one of {FORMULATIONS}, got {formulation!r}")
     if form not in (*FORMS, "auto"):
         raise InvalidArgumentError(f"form: expected 'auto' or one of {FORMS}, got {form!r}")
-    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
-        raise InvalidArgumentError(f"tolerance: must be in (0, 1), got {tolerance!r}")
-    if time_limit is not None and not time_limit > 0:
-        raise InvalidArgumentError(f"time_limit: must be > 0 seconds, got {time_limit!r}")
-    if solver in CONTACT_SPACE_SOLVERS and (formulation != "complementarity" or form == "primal"):
-        raise InvalidArgumentError(f"solver {solver!r} solves the complementarity formulation in contact form only "
-                                   f"(got formulation {formulation!r}, form {form!r})")
+    check_options(tolerance, None, time_limit)
+    planned = spec.plan(formulation, form)
     if on_failure not in ("raise", "return"):
         raise InvalidArgumentError(f"on_failure: expected 'raise' or 'return', got {on_failure!r}")
+    return planned
+
+
+def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, lam: np.ndarray | None,
+                       tolerance: float) -> str:
+    """Why a reported solution is not accepted, or ``""`` when it is (docs/model-notes.md,
+    "Accepting a QP answer"). Each measure must be at most ``ACCEPT_FACTOR·tolerance``:
+
+    - both QP formulations: the penetration;
+    - complementarity, where contact impulses are given: the relative duality gap (feasible but
+      not optimal, e.g. impulses larger than needed), the multiplier inconsistency (impulses
+      that are not equal and opposite contact impulses) and the most negative, pulling contact
+      impulse relative to the largest;
+    - least_squares, when ``Mx = b`` is consistent: the overshoot of ``B̃ỹ = b̃``.
+
+    The plain problem (formulation ``"linear"``) is not checked here: its solution may
+    penetrate (an inconsistent ``Mx = b``) or pull by design; the linear solve checks its own
+    optimality."""
+    if formulation == "linear":
+        return ""
+    limit = ACCEPT_FACTOR * tolerance
+    checks = {"penetrates by": metrics.penetration(system, y)}
+    if formulation == "complementarity" and lam is not None:
+        # Feasible but not optimal (e.g. impulses larger than needed) shows up here.
+        checks["has relative duality gap"] = metrics.duality_gap(system, y, lam)
+        # Impulses that are not equal and opposite contact impulses (primal form: ỹ and the
+        # duals disagree), or contact impulses that pull: both seen without scaling
+        # (docs/stability.md), where they cancel inside the duality gap.
+        checks["has multiplier inconsistency"] = metrics.multiplier_consistency(system, y, lam)
+        checks["pulls with relative contact impulse"] = max(0.0, -float(lam.min(initial=0.0))) / max(
+            float(np.abs(lam).max(initial=0.0)), 1e-300)
+    overshoot = float(np.max(system.matrix @ y - system.rhs)) / float(np.max(np.abs(system.rhs)))
+    if formulation == "least_squares" and overshoot > limit:
+        # Feasible is not optimal: when Mx = b is consistent the optimum has B̃ỹ = b̃, and an
+        # answer overshooting it (seen without scaling, docs/stability.md) must not pass. The
+        # linear solve that decides consistency runs only for answers with such a slack.
+        try:
+            consistent = solve_min_norm(system.matrix, system.rhs, tolerance=1e-10).consistent
+        except SolverFailedError:
+            consistent = False
+        if consistent:
+            checks["overshoots by"] = overshoot
+    for what, value in checks.items():
+        if not value <= limit:
+            return f"the answer {what} {value:.3g} (> {limit:.3g} = {ACCEPT_FACTOR:g}·tolerance)"
+    return ""
 
 
 def solve_system(
     system: ContactSystem,
-    cells: Cells,
     *,
     solver: str = "osqp",
     formulation: str = "complementarity",
@@ -112,63 +152,34 @@ def solve_system(
     solver_settings: dict[str, Any] | None = None,
     estimate_condition: bool = False,
 ) -> tuple[np.ndarray | None, np.ndarray | None, dict[str, Any]]:
-    """Solve an assembled system. Returns ``(ỹ, λ̃, info)``; ``info`` has ``converged``,
+    """Solve an assembled system with a registered solver and check the answer
+    (:func:`acceptance_failure`). Returns ``(ỹ, λ̃, info)``; ``info`` has ``converged``,
     ``status``, ``iterations``, ``setup``, ``solve``, ``message``, ``condition_estimate``,
-    ``form``. Used by :func:`resolve` and by the benchmarks (which assemble once and solve many
+    ``formulation`` and ``form`` (what was solved) and ``extras`` (what the solver reported
+    besides). Used by :func:`resolve` and by the studies (which assemble once and solve many
     times)."""
-    form = DEFAULT_FORM[formulation] if form == "auto" else form
-    info: dict[str, Any] = {"form": form, "condition_estimate": None, "message": ""}
-    if solver == "linear":
-        t0 = time.perf_counter()
-        try:
-            # The optimality check is relative; 1e-2·tolerance keeps it tighter than the QPs'.
-            lin = solve_min_norm(system.matrix, system.rhs, tol=max(min(tolerance, 1e-6) * 1e-2, 1e-12),
-                                 estimate_condition=estimate_condition)
-        except SolverFailedError as exc:
-            info.update(converged=False, status="failed", iterations=None, setup=0.0,
-                        solve=time.perf_counter() - t0, message=str(exc))
-            return None, None, info
-        info.update(converged=True, status=f"solved ({lin.method}{'' if lin.consistent else ', least squares'})",
-                    iterations=lin.iterations, setup=0.0, solve=lin.seconds, condition_estimate=lin.condition_estimate)
-        return lin.y, lin.lam, info
-    out = solve_qp_system(system, solver, formulation, form, tolerance=tolerance, time_limit=time_limit,
-                          regularization=regularization, settings=solver_settings)
-    info.update(status=out.status, iterations=out.iterations, setup=out.setup_seconds, solve=out.solve_seconds)
+    spec = get_solver(solver)
+    formulation, form = spec.plan(formulation, form)
+    settings = dict(solver_settings or {})
+    # A solver that can estimate the condition from its own factorization takes the setting.
+    own_estimate = "estimate_condition" in (spec.settings or ())
+    if estimate_condition and own_estimate:
+        settings["estimate_condition"] = True
+    out = solve(Problem.of(system, regularization), solver, formulation, form, tolerance=tolerance,
+                time_limit=time_limit, settings=settings)
+    info: dict[str, Any] = {"formulation": formulation, "form": form, "condition_estimate": None, "message": "",
+                            "status": out.status, "iterations": out.iterations, "setup": out.setup_seconds,
+                            "solve": out.solve_seconds, "extras": out.extras}
     if out.y is None:
         info.update(converged=False, message=out.error or f"{solver} returned no solution (status {out.status})")
     elif not out.found:
         info.update(converged=False, message=f"{solver} did not converge (status {out.status})")
     else:
-        info.update(converged=True)
-        limit = ACCEPT_FACTOR * tolerance
-        checks = {"penetrates by": metrics.penetration(system, out.y)}
-        if formulation == "complementarity" and out.lam is not None:
-            # Feasible but not optimal (e.g. impulses larger than needed) shows up here.
-            checks["has relative duality gap"] = metrics.duality_gap(system, out.y, out.lam)
-            # Impulses that are not equal and opposite contact impulses (primal form: ỹ and the
-            # duals disagree), or contact impulses that pull: both seen without scaling
-            # (docs/stability.md), where they cancel inside the duality gap.
-            checks["has multiplier inconsistency"] = metrics.multiplier_consistency(system, out.y, out.lam)
-            checks["pulls with relative contact impulse"] = max(0.0, -float(out.lam.min(initial=0.0))) / max(
-                float(np.abs(out.lam).max(initial=0.0)), 1e-300)
-        overshoot = float(np.max(system.matrix @ out.y - system.rhs)) / float(np.max(np.abs(system.rhs)))
-        if formulation == "least_squares" and overshoot > limit:
-            # Feasible is not optimal: when Mx = b is consistent the optimum has B̃ỹ = b̃, and an
-            # answer overshooting it (seen without scaling, docs/stability.md) must not pass. The
-            # linear solve that decides consistency runs only for answers with such a slack.
-            try:
-                consistent = solve_min_norm(system.matrix, system.rhs, tol=1e-10).consistent
-            except SolverFailedError:
-                consistent = False
-            if consistent:
-                checks["overshoots by"] = overshoot
-        for what, value in checks.items():
-            if not value <= limit:
-                info.update(converged=False, message=f"{solver} reported success but the answer {what} {value:.3g} "
-                                                     f"(> {limit:.3g} = {ACCEPT_FACTOR:g}·tolerance)")
-                break
+        failure = acceptance_failure(system, formulation, out.y, out.lam, tolerance)
+        info.update(converged=not failure, message=f"{solver} reported success but {failure}" if failure else "")
     if estimate_condition:
-        info["condition_estimate"] = solve_min_norm(system.matrix, system.rhs, method="auto", estimate_condition=True).condition_estimate
+        info["condition_estimate"] = (out.extras.get("condition_estimate") if own_estimate else solve_min_norm(
+            system.matrix, system.rhs, method="auto", estimate_condition=True).condition_estimate)
     return out.y, out.lam, info
 
 
@@ -197,13 +208,16 @@ def resolve(
 
     Args:
         cells: the scene (positions, shapes, masses, momenta before contact).
-        solver: ``"linear"`` (plain minimum-W-norm solve of ``Mx = b``), ``"mprgp"`` (built-in
-            matrix-free QP solver, complementarity only: :mod:`qpcontact.mprgp`) or an installed
-            qpsolvers backend (``"clarabel"``, ``"osqp"``, ...; see
-            :func:`qpcontact.available_solvers`).
-        formulation: ``"complementarity"`` (impulses only push; default) or ``"least_squares"``.
-            Ignored by ``solver="linear"``.
-        form: ``"primal"``, ``"contact"`` or ``"auto"`` (see :mod:`qpcontact.qp`).
+        solver: a registered solver (:func:`qpcontact.available_solvers`): ``"linear"`` (plain
+            minimum-W-norm solve of ``Mx = b``), ``"mprgp"`` (built-in matrix-free QP solver,
+            complementarity only: :mod:`qpcontact.solvers.mprgp`) or an installed qpsolvers
+            backend (``"clarabel"``, ``"osqp"``, ...).
+        formulation: ``"complementarity"`` (impulses only push; default), ``"least_squares"``, or
+            ``"linear"`` (the plain problem). A plain solver (``solver="linear"``) solves the
+            plain problem whatever formulation is asked for.
+        form: ``"primal"``, ``"contact"`` or ``"auto"`` (see
+            :mod:`qpcontact.solvers.qpsolvers_bridge`; ``"auto"``:
+            :data:`qpcontact.solvers.DEFAULT_FORM`).
         tolerance: relative tolerance handed to the solver (dimensionless: the problem is scaled
             so that ``max b = 1``).
         margin: contacts closer than this also count [length].
@@ -213,19 +227,20 @@ def resolve(
             None.
         reduce: leave out unknowns the scene does not need (default True).
         planar: force (True) or forbid (False) the planar reduction; None detects it.
-        scale: nondimensionalize the system (default; see :mod:`qpcontact.system`). ``False``
+        scale: nondimensionalize the system (default; see :mod:`qpcontact.assembly.system`). ``False``
             hands the solvers the system in the caller's units (for measurements only).
         time_limit: seconds the solver may take, where the backend supports it.
         regularization: ε of the least_squares formulation (dimensionless; default 0 = the exact
             minimum-W-norm selection).
-        solver_settings: extra backend options, passed through to qpsolvers (for ``"mprgp"``:
-            ``max_iterations``, ``proportioning``).
+        solver_settings: extra solver options: a qpsolvers backend's own options, passed
+            through; for the built-in solvers the names their spec lists (``"mprgp"``:
+            ``max_iterations``, ``proportioning``), others raise.
         estimate_condition: also estimate the condition number of the scaled Delassus operator.
         on_failure: ``"raise"`` a :class:`~qpcontact.errors.SolverFailedError` (default), or
             ``"return"`` the unconverged result (with ``cells`` unchanged).
         keep_separating: also put the contacts that do not collide (``b <= 0``) into the system
             when any contact collides, so impulses elsewhere cannot drive them into approach
-            (:func:`qpcontact.contacts.colliding`). Complementarity QPs only: the plain solve and
+            (:func:`qpcontact.geometry.colliding`). Complementarity QPs only: the plain solve and
             least_squares would pull separating contacts together.
 
     Returns:
@@ -235,24 +250,24 @@ def resolve(
         InvalidArgumentError, UnknownSolverError, SolverNotInstalledError: bad arguments.
         SolverFailedError: the solver failed, did not converge, or its answer fails the checks.
     """
-    _check_options(solver, formulation, form, tolerance, time_limit, on_failure)
+    solved, solved_form = _check_options(solver, formulation, form, tolerance, time_limit, on_failure)
     t_start = time.perf_counter()
     if contacts is None:
         contacts = find_contacts(cells, margin, planar=bool(planar))
-    if keep_separating and (solver == "linear" or formulation != "complementarity"):
+    if keep_separating and solved != "complementarity":
         raise InvalidArgumentError("keep_separating needs a QP solver with formulation='complementarity' "
                                    f"(got solver {solver!r}, formulation {formulation!r})")
     active, b = colliding(contacts, position_correction=position_correction, dt=dt, keep_separating=keep_separating)
     t_detect = time.perf_counter()
     n_cells = cells.n
     if len(active) == 0:  # nothing to solve: never hand an unconstrained QP to a backend
-        return Result(np.zeros((n_cells, 7)), cells, active, np.zeros(0), solver, formulation,
-                      DEFAULT_FORM[formulation] if form == "auto" else form, True, "no_contact", 0,
+        return Result(np.zeros((n_cells, 7)), cells, active, np.zeros(0), solver, solved, solved_form, True,
+                      "no_contact", 0,
                       {"detect": t_detect - t_start, "assemble": 0.0, "setup": 0.0, "solve": 0.0, "check": 0.0,
                        "total": time.perf_counter() - t_start}, {"penetration": 0.0}, 0, bool(planar))
     system = build_system(cells, active, b, reduce=reduce, planar=planar, scale=scale)
     t_assemble = time.perf_counter()
-    y, lam, info = solve_system(system, cells, solver=solver, formulation=formulation, form=form, tolerance=tolerance,
+    y, lam, info = solve_system(system, solver=solver, formulation=formulation, form=form, tolerance=tolerance,
                                 time_limit=time_limit, regularization=regularization, solver_settings=solver_settings,
                                 estimate_condition=estimate_condition)
     t_solve = time.perf_counter()
@@ -265,7 +280,7 @@ def resolve(
         errors["penetration"] = metrics.penetration(system, y)
         if lam is not None:
             errors["multiplier_consistency"] = metrics.multiplier_consistency(system, y, lam)
-            if formulation == "complementarity" and solver != "linear":
+            if solved == "complementarity":
                 errors["complementarity"] = metrics.complementarity_residual(system, y, lam)
                 errors["duality_gap"] = metrics.duality_gap(system, y, lam)
         errors.update(metrics.physics(cells, system, impulses, contact_impulses))
@@ -277,8 +292,8 @@ def resolve(
         contacts=active,
         contact_impulses=contact_impulses,
         solver=solver,
-        formulation="linear" if solver == "linear" else formulation,
-        form="contact" if solver == "linear" else info["form"],
+        formulation=solved,
+        form=solved_form,
         converged=converged,
         status=info["status"],
         iterations=info["iterations"],

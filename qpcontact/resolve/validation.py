@@ -6,11 +6,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import metrics
-from ..solvers.linear import LinearSolution, solve_min_norm
-from ..solvers.qpsolvers_bridge import solve_qp_system
-from .resolve import Result
 from ..assembly.system import ContactSystem
+from ..solvers import LinearSolution, Problem, solve, solve_min_norm
+from . import metrics
+from .resolve import Result
 
 #: Contact impulses below this (scaled) count as inactive in the linear solve.
 ACTIVE_THRESHOLD = 1e-9
@@ -75,7 +74,7 @@ def active_set_polish(system: ContactSystem, lam: np.ndarray, *,
         if not active.any():
             continue
         try:
-            polished = solve_min_norm(system.matrix[active], system.rhs[active], tol=1e-12)
+            polished = solve_min_norm(system.matrix[active], system.rhs[active], tolerance=1e-12)
         except Exception:
             continue
         feasible = np.all(system.matrix @ polished.y - system.rhs >= -1e-12)
@@ -87,17 +86,18 @@ def active_set_polish(system: ContactSystem, lam: np.ndarray, *,
 
 def reference_solution(system: ContactSystem, formulation: str, *, tolerance: float = 1e-10,
                        guess: np.ndarray | None = None) -> np.ndarray:
-    """A high-accuracy ``ỹ*`` for a formulation: the linear solve when it already satisfies the
-    formulation's optimality conditions (all contacts active), else Clarabel at ``tolerance``
-    followed by an exact active-set polish that is kept only if it verifies (feasible, and for
-    complementarity, non-negative contact impulses).
+    """A high-accuracy ``ỹ*`` for a formulation: the linear solve for the plain problem
+    (``"linear"``) and wherever it already satisfies the formulation's optimality conditions
+    (all contacts active), else Clarabel at ``tolerance`` followed by an exact active-set polish
+    that is kept only if it verifies (feasible, and for complementarity, non-negative contact
+    impulses).
 
     ``guess``: contact impulses ``λ̃`` from a faster solve (complementarity only). If the polish of
     their active set verifies (:func:`active_set_polish`), that exact optimum is returned and the
     Clarabel solve (minutes at 10⁵ cells) is skipped."""
     # At 1e-12 LSMR cannot certify the least-squares answer of a jammed packing (it stops at 3e-11).
-    lin = solve_min_norm(system.matrix, system.rhs, tol=min(tolerance, 1e-10))
-    if formulation == "least_squares" and lin.consistent:
+    lin = solve_min_norm(system.matrix, system.rhs, tolerance=min(tolerance, 1e-10))
+    if formulation == "linear" or (formulation == "least_squares" and lin.consistent):
         return lin.y
     if formulation == "complementarity" and lin.consistent and np.all(lin.lam > 0):
         return lin.y
@@ -105,8 +105,7 @@ def reference_solution(system: ContactSystem, formulation: str, *, tolerance: fl
         polished = active_set_polish(system, guess)
         if polished is not None:
             return polished
-    out = solve_qp_system(system, "clarabel", formulation, "primal",
-                          tolerance=tolerance)
+    out = solve(Problem.of(system), "clarabel", formulation, "primal", tolerance=tolerance)
     if out.y is None:
         raise RuntimeError(f"reference solve failed: {out.status} {out.error or ''}")
     if formulation != "complementarity" or out.lam is None:

@@ -1,6 +1,6 @@
 """The plain linear solve: the minimum-W-norm least-squares solution of ``M x = b``.
 
-In the scaled unknowns of :mod:`qpcontact.system` (``ỹ = W^{1/2}x``, up to constants) this is
+In the scaled unknowns of :mod:`qpcontact.assembly.system` (``ỹ = W^{1/2}x``, up to constants) this is
 the minimum-Euclidean-norm least-squares solution of ``B̃ ỹ = b̃``, i.e. ``ỹ = B̃⁺ b̃``. It is
 the limit of ``(MᵀM + εW)⁻¹Mᵀb`` as ε → 0 (model.md), computed without forming ``MᵀM``:
 
@@ -13,8 +13,12 @@ the limit of ``(MᵀM + εW)⁻¹Mᵀb`` as ε → 0 (model.md), computed withou
    packings where ``M x = b`` has no solution) or when the factorized answer fails the check.
 
 Either answer is accepted only if it passes the stopping test of LSQR/LSMR (:func:`optimality`:
-a consistent solution, or a least-squares one) at ``tol``; otherwise
+a consistent solution, or a least-squares one) at ``tolerance``; otherwise
 :class:`~qpcontact.errors.SolverFailedError` is raised.
+
+Registered as the solver ``"linear"`` (formulation ``"linear"``): the contact form is the
+Delassus route 1 (LSMR as fallback), the primal form LSMR on ``B̃`` alone (2; no factorization).
+Its solver setting ``estimate_condition`` also estimates ``cond₁(Ã)`` from the LU.
 """
 
 from __future__ import annotations
@@ -22,12 +26,14 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass
+from typing import Any, Mapping
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..errors import SolverFailedError
+from ..errors import InvalidArgumentError, SolverFailedError
+from .registry import Problem, SolverOutput, SolverSpec, register
 
 
 @dataclass
@@ -40,7 +46,7 @@ class LinearSolution:
         method: ``"lu"`` or ``"lsmr"``.
         iterations: LSMR iterations (0 for LU).
         optimality: the relative least-squares optimality residual that was checked.
-        consistent: whether ``B̃ỹ = b̃`` holds (to ``tol``); False for over-determined contacts.
+        consistent: whether ``B̃ỹ = b̃`` holds (to ``tolerance``); False for over-determined contacts.
         condition_estimate: 1-norm condition estimate of ``Ã`` (LU path only, else None).
         seconds: wall time of the solve.
     """
@@ -84,7 +90,7 @@ def solve_min_norm(
     matrix: sp.spmatrix,
     rhs: np.ndarray,
     *,
-    tol: float = 1e-10,
+    tolerance: float = 1e-10,
     method: str = "auto",
     delassus: sp.csc_matrix | None = None,
     estimate_condition: bool = False,
@@ -95,7 +101,7 @@ def solve_min_norm(
     Args:
         matrix: (K, n) sparse ``B̃``.
         rhs: (K,) ``b̃``.
-        tol: relative tolerance of the optimality check (and of LSMR).
+        tolerance: relative tolerance of the optimality check (and of LSMR).
         method: ``"auto"`` (LU, LSMR if that fails), ``"lu"`` or ``"lsmr"``.
         delassus: ``B̃B̃ᵀ`` if the caller already has it.
         estimate_condition: also estimate ``cond₁(Ã)`` (a few extra triangular solves).
@@ -113,24 +119,49 @@ def solve_min_norm(
             lam = lu.solve(rhs)
             y = matrix.T @ lam
             opt, rel = optimality(matrix, y, rhs, norm)
-            if np.all(np.isfinite(y)) and opt <= tol:
+            if np.all(np.isfinite(y)) and opt <= tolerance:
                 cond = _condition_estimate(a, lu) if estimate_condition else None
-                return LinearSolution(y, lam, "lu", 0, opt, rel <= max(tol, 1e-12) * 10, cond, time.perf_counter() - start)
-            failures.append(f"LU answer failed the optimality check ({opt:.3g} > {tol:.3g})")
+                return LinearSolution(y, lam, "lu", 0, opt, rel <= max(tolerance, 1e-12) * 10, cond, time.perf_counter() - start)
+            failures.append(f"LU answer failed the optimality check ({opt:.3g} > {tolerance:.3g})")
         except (RuntimeError, spla.MatrixRankWarning) as exc:  # exactly singular Delassus operator
             failures.append(f"LU: {exc}")
         if method == "lu":
             raise SolverFailedError("linear solve (lu): " + "; ".join(failures))
     elif method != "lsmr":
-        raise ValueError(f"method: expected 'auto', 'lu' or 'lsmr', got {method!r}")
+        raise InvalidArgumentError(f"method: expected 'auto', 'lu' or 'lsmr', got {method!r}")
 
     cap = max_iterations or 10 * (matrix.shape[0] + matrix.shape[1])
-    out = spla.lsmr(matrix, rhs, atol=tol * 1e-2, btol=tol * 1e-2, maxiter=cap)
+    out = spla.lsmr(matrix, rhs, atol=tolerance * 1e-2, btol=tolerance * 1e-2, maxiter=cap)
     y, istop, iterations = out[0], out[1], out[2]
     opt, rel = optimality(matrix, y, rhs, norm)
-    if not np.all(np.isfinite(y)) or opt > tol:
-        failures.append(f"LSMR stopped with istop={istop} after {iterations} iterations, optimality {opt:.3g} > {tol:.3g}")
+    if not np.all(np.isfinite(y)) or opt > tolerance:
+        failures.append(f"LSMR stopped with istop={istop} after {iterations} iterations, optimality {opt:.3g} > {tolerance:.3g}")
         raise SolverFailedError("linear solve did not converge: " + "; ".join(failures))
     # Contact impulses: the minimum-norm λ̃ with B̃ᵀλ̃ = ỹ (consistent, since ỹ is in the row space).
-    lam = spla.lsmr(matrix.T.tocsr(), y, atol=tol * 1e-2, btol=tol * 1e-2, maxiter=cap)[0]
-    return LinearSolution(y, lam, "lsmr", int(iterations), opt, rel <= max(tol, 1e-12) * 10, None, time.perf_counter() - start)
+    lam = spla.lsmr(matrix.T.tocsr(), y, atol=tolerance * 1e-2, btol=tolerance * 1e-2, maxiter=cap)[0]
+    return LinearSolution(y, lam, "lsmr", int(iterations), opt, rel <= max(tolerance, 1e-12) * 10, None, time.perf_counter() - start)
+
+
+def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
+           settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
+    """The registered solve: the optimality check at ``1e-2·tolerance`` (never looser than
+    1e-8, never tighter than 1e-12), so that it stays tighter than the QPs'."""
+    start = time.perf_counter()
+    try:
+        lin = solve_min_norm(problem.matrix, problem.rhs, tolerance=max(min(tolerance, 1e-6) * 1e-2, 1e-12),
+                             method="lsmr" if form == "primal" else "auto",
+                             estimate_condition=bool(settings.get("estimate_condition", False)))
+    except SolverFailedError as exc:
+        return SolverOutput(None, None, False, "failed", None, 0.0, time.perf_counter() - start, error=str(exc))
+    status = f"solved ({lin.method}{'' if lin.consistent else ', least squares'})"
+    return SolverOutput(lin.y, lin.lam, True, status, lin.iterations, 0.0, lin.seconds,
+                        extras={"condition_estimate": lin.condition_estimate, "consistent": lin.consistent,
+                                "optimality": lin.optimality})
+
+
+register(SolverSpec(
+    "linear", formulations=("linear",), forms=("contact", "primal"), warm_start=False, time_limit=False, solve=_solve,
+    description="plain minimum-kinetic-energy solve of Mx = b (may pull): sparse LU of the Delassus operator "
+                "(contact form) or LSMR (primal form)",
+    settings=("estimate_condition",), matrix_free=("primal",), bundled=True,
+))

@@ -25,21 +25,26 @@ Scaling: the unknowns are ``μ = √diag(Ã) λ̃``. A positive diagonal change 
 bounds ``λ̃ ≥ 0`` as bounds and gives ``Ã`` a unit diagonal (Jacobi preconditioning that the
 projections survive).
 
-Stopping: the complementarity residual ``‖min(λ̃, Ãλ̃ − b̃)‖∞ ≤ tol`` in the unscaled impulses,
-the test of :func:`qpcontact.baselines.bbpgd` (``max b̃ = 1``, so relative to the largest
-approach speed), checked on a freshly computed gradient before an answer is called converged.
+Stopping: the complementarity residual ``‖min(λ̃, Ãλ̃ − b̃)‖∞ ≤ tolerance`` in the unscaled
+impulses, the test of :func:`qpcontact.solvers.baselines.bbpgd` (``max b̃ = 1``, so relative to
+the largest approach speed), checked on a freshly computed gradient before an answer is called
+converged.
+
+Registered as the solver ``"mprgp"``: complementarity in contact form, solved per independent
+block, warm start (``λ̃``) and time limit honoured; settings ``max_iterations`` and
+``proportioning``.
 """
 
 from __future__ import annotations
 
 import time
-from typing import Callable
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import scipy.sparse as sp
 
-from .baselines import IterativeSolution, check_options
 from ..errors import InvalidArgumentError
+from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
 
 #: Power iterations for the estimate of ‖Ã‖ behind the expansion step.
 POWER_ITERATIONS = 10
@@ -64,7 +69,7 @@ def mprgp(
     matrix: sp.spmatrix,
     rhs: np.ndarray,
     *,
-    tol: float = 1e-6,
+    tolerance: float = 1e-6,
     max_iterations: int | None = None,
     time_limit: float | None = None,
     initial: np.ndarray | None = None,
@@ -73,21 +78,21 @@ def mprgp(
     """Solve ``min ½λ̃ᵀB̃B̃ᵀλ̃ − b̃ᵀλ̃, λ̃ ≥ 0`` (see the module docstring).
 
     Args:
-        matrix: (K, n) sparse ``B̃`` (scaled, :class:`qpcontact.system.ContactSystem`).
+        matrix: (K, n) sparse ``B̃`` (scaled, :class:`qpcontact.assembly.ContactSystem`).
         rhs: (K,) ``b̃``.
-        tol: stop when ``‖min(λ̃, Ãλ̃ − b̃)‖∞ ≤ tol``.
+        tolerance: stop when ``‖min(λ̃, Ãλ̃ − b̃)‖∞ ≤ tolerance``.
         max_iterations: cap on CG, expansion and proportioning steps together (default 100 000).
         time_limit: stop after this many seconds.
         initial: starting ``λ̃`` (negative entries are set to 0; default zero).
         proportioning: ``Γ > 0``; larger releases contacts from the bound less eagerly.
 
     Returns:
-        :class:`~qpcontact.baselines.IterativeSolution` with ``ỹ = B̃ᵀλ̃`` and ``λ̃``; status
+        :class:`~qpcontact.solvers.registry.IterativeSolution` with ``ỹ = B̃ᵀλ̃`` and ``λ̃``; status
         ``"converged"``, ``"max_iterations"``, ``"time_limit"``, ``"infeasible"`` (a contact row
         of ``B̃`` is zero but asks for ``b̃ > 0``) or ``"breakdown"`` (no curvature along a
         search direction).
     """
-    check_options(tol, max_iterations, time_limit)
+    check_options(tolerance, max_iterations, time_limit)
     if not (np.isfinite(proportioning) and proportioning > 0):
         raise InvalidArgumentError(f"proportioning: must be finite and > 0, got {proportioning!r}")
     start = time.perf_counter()
@@ -130,12 +135,12 @@ def mprgp(
     p = phi.copy()
     status, iterations, res = "max_iterations", 0, residual(x, g)
     while True:
-        if res <= tol:
+        if res <= tolerance:
             g = apply(x) - b  # the recurrence drifts: confirm on a fresh gradient
             free = x > 0
             phi, beta = np.where(free, g, 0.0), np.where(free, 0.0, np.minimum(g, 0.0))
             res = residual(x, g)
-            if res <= tol:
+            if res <= tolerance:
                 status = "converged"
                 break
             p = phi.copy()
@@ -194,3 +199,16 @@ def mprgp(
         res = residual(x, g)
     lam = scale * x
     return IterativeSolution(Bt @ lam, lam, iterations, status == "converged", status, res, time.perf_counter() - start)
+
+
+def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
+           settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
+    return mprgp(problem.matrix, problem.rhs, tolerance=tolerance, time_limit=time_limit, initial=initial,
+                 **settings).output()
+
+
+register(SolverSpec(
+    "mprgp", formulations=("complementarity",), forms=("contact",), warm_start=True, time_limit=True, solve=_solve,
+    description="built-in matrix-free MPRGP on the contact-space complementarity QP (no factorization)",
+    settings=("max_iterations", "proportioning"), blockwise=True, matrix_free=("contact",), bundled=True,
+))

@@ -5,16 +5,18 @@ cells by default) the benchmark times, with repeats (median, min, max):
 
 - *detect*: :func:`~qpcontact.contacts.find_contacts` + :func:`~qpcontact.contacts.colliding`;
 - *assemble*: :func:`~qpcontact.system.build_system`;
-- *solve*, per solver: the plain linear solve (the floor), the QP backends through
-  :func:`~qpcontact.resolve.solve_system` (setup + solve), and the field's baselines from
-  :mod:`qpcontact.baselines`: ``cg`` (conjugate gradient on the normal equations from zero, as
-  in CellModeller) and ``bbpgd`` (projected gradient on the contact-space complementarity QP);
-  the built-in matrix-free QP solver ``mprgp`` (:mod:`qpcontact.mprgp`) runs like a backend;
-- *check*: the error measures of :mod:`qpcontact.metrics` on one answer.
+- *solve*, per solver, every one through :func:`~qpcontact.resolve.solve_system` (setup +
+  solve, the acceptance checks included): the plain linear solve (the floor; ``linear/primal``
+  is its LSMR route), the QP backends, the built-in matrix-free QP solver ``mprgp``
+  (:mod:`qpcontact.solvers.mprgp`) and the field's baselines from
+  :mod:`qpcontact.solvers.baselines`: ``cg`` (conjugate gradient on the normal equations from
+  zero, as in CellModeller) and ``bbpgd`` (projected gradient on the contact-space
+  complementarity QP);
+- *check*: the error measures of :mod:`qpcontact.resolve.metrics` on one answer.
 
 Every answer is verified, untimed, against a high-accuracy reference: the QP answers against
 :func:`~qpcontact.validation.reference_solution` (relative error ``‖x − x*‖_W/‖x*‖_W``, target
-1e-6), the linear and CG answers against the linear solve at 1e-12. Each snapshot runs in its own
+1e-6), the answers of the plain solvers (linear, CG) against the linear solve at 1e-12. Each snapshot runs in its own
 subprocess, so its peak resident memory (``ru_maxrss``, taken after the timed phases and before
 the verification) is that of one step (with every solver). The scaling exponent of detection + assembly is the slope
 of a least-squares line through (log cells, log seconds).
@@ -48,23 +50,17 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..resolve import metrics
-
+from ..assembly import build_system
+from ..geometry import Cells, colliding, find_contacts
+from ..resolve import active_set_polish, metrics, reference_solution, solve_system
+from ..solvers import available_solvers, get_solver, solve_min_norm
 from . import scenes
-from ..solvers.baselines import BASELINES, solve_baseline
-from ..geometry.cells import Cells
-from ..geometry.contacts import colliding, find_contacts
-from ..solvers.linear import solve_min_norm
-from ..resolve.resolve import solve_system
-from ..assembly.system import ContactSystem, build_system
-from ..resolve.validation import active_set_polish, reference_solution
 
-#: Solver specs ``name[/form]`` timed by default: the floor, the baseline, and the QP backends.
-DEFAULT_SOLVERS = ("linear", "linear/lsmr", "cg@1e-8", "mprgp", "osqp/contact", "osqp/primal", "clarabel/primal@1e-9")
+#: Solver specs ``name[/form][@tolerance]`` timed by default: the floor (LU and LSMR), the
+#: baseline, and the QP solvers.
+DEFAULT_SOLVERS = ("linear", "linear/primal", "cg@1e-8", "mprgp", "osqp/contact", "osqp/primal", "clarabel/primal@1e-9")
 #: The relative error every answer must reach (issue 6).
 TARGET_ERROR = 1e-6
-#: Solvers of the plain problem ``M x = b`` (checked against the linear solve, not the QP).
-PLAIN_SOLVERS = ("linear", "cg", "cg_euclidean")
 MARK_START, MARK_END = "<!-- bench:start -->", "<!-- bench:end -->"
 GENERATORS: dict[int, Callable[[int, int], Cells]] = {2: scenes.colony_2d, 3: scenes.colony_3d}
 
@@ -137,32 +133,18 @@ def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str
         name, form, tol = _parse_solver(spec)
         tol = tol or tolerance
         row: dict[str, Any] = {"tolerance": tol}
-        if name in BASELINES:
-            def run(name: str = name, tol: float = tol):
-                return solve_baseline(system, name, tolerance=tol, time_limit=time_limit)
-            out, times = _timed(run, repeats)
-            y = out.y
-            if out.lam is not None:
-                guesses[spec] = out.lam
-            row.update(converged=out.converged, status=out.status, iterations=out.iterations)
-        elif name == "linear" and form == "lsmr":  # the iterative floor: LSMR to the same check
-            def lsmr(tol: float = tol):
-                return solve_min_norm(system.matrix, system.rhs, method="lsmr", tol=max(min(tol, 1e-6) * 1e-2, 1e-12))
-            lin, times = _timed(lsmr, repeats)
-            y = lin.y
-            row.update(converged=True, status="solved (lsmr)", iterations=lin.iterations)
-        else:
-            def call(name: str = name, form: str = form, tol: float = tol):
-                return solve_system(system, cells, solver=name, form=form, tolerance=tol, time_limit=time_limit)
-            (y, lam, info), times = _timed(call, repeats)
-            row.update(converged=bool(info["converged"]), status=str(info["status"]), iterations=info["iterations"],
-                       form=info["form"], message=info["message"])
-            if name != "linear" and y is not None and lam is not None:
-                guesses[spec] = lam
-                (_, t_check) = _timed(lambda: (metrics.penetration(system, y), metrics.complementarity_residual(system, y, lam),
-                                               metrics.multiplier_consistency(system, y, lam),
-                                               metrics.physics(cells, system, system.to_impulses(y), system.to_contact_impulses(lam))), 1)
-                row["check"] = _stats(t_check)
+
+        def call(name: str = name, form: str = form, tol: float = tol):
+            return solve_system(system, solver=name, form=form, tolerance=tol, time_limit=time_limit)
+        (y, lam, info), times = _timed(call, repeats)
+        row.update(converged=bool(info["converged"]), status=str(info["status"]), iterations=info["iterations"],
+                   form=info["form"], message=info["message"])
+        if not get_solver(name).plain and y is not None and lam is not None:
+            guesses[spec] = lam
+            (_, t_check) = _timed(lambda: (metrics.penetration(system, y), metrics.complementarity_residual(system, y, lam),
+                                           metrics.multiplier_consistency(system, y, lam),
+                                           metrics.physics(cells, system, system.to_impulses(y), system.to_contact_impulses(lam))), 1)
+            row["check"] = _stats(t_check)
         row["solve"] = _stats(times)
         answers[spec] = y
         record["solvers"][spec] = row
@@ -171,13 +153,13 @@ def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str
     # Verification (untimed): the QPs against the complementarity reference, the linear solve and CG
     # against the linear solve at 1e-12.
     t0 = time.perf_counter()
-    # The plain solvers' reference: the LU solve at 1e-12 where the LU ran (so it will finish),
-    # else LSMR to an optimality of 1e-10.
-    plain_run = any(_parse_solver(spec)[0] in PLAIN_SOLVERS for spec in answers)
-    lu_ran = any(_parse_solver(spec)[:2] == ("linear", "auto") for spec in answers)
+    # The plain solvers' reference: the LU solve at 1e-12 where a plain solver factorized (so it
+    # will finish), else LSMR to an optimality of 1e-10.
+    plain_run = any(_plain(spec) for spec in answers)
+    lu_ran = any(_plain(spec) and not _matrix_free(spec) for spec in answers)
     linear_ref = None
     if plain_run:
-        linear = solve_min_norm(system.matrix, system.rhs, tol=1e-12 if lu_ran else 1e-10,
+        linear = solve_min_norm(system.matrix, system.rhs, tolerance=1e-12 if lu_ran else 1e-10,
                                 method="auto" if lu_ran else "lsmr")
         linear_ref = linear.y
         record["linear_reference"] = f"{linear.method} (optimality {linear.optimality:.1e})"
@@ -196,8 +178,7 @@ def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str
         qp_ref, record["reference_method"] = reference_solution(system, "complementarity"), "clarabel 1e-10 + polish"
     record["reference_seconds"] = time.perf_counter() - t0
     for spec, y in answers.items():
-        name = _parse_solver(spec)[0]
-        plain = name in PLAIN_SOLVERS
+        plain = _plain(spec)
         ref = linear_ref if plain else qp_ref
         row = record["solvers"][spec]
         row["reference"] = "linear" if plain else "complementarity"
@@ -233,9 +214,27 @@ def machine_description() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, {platform.system()}"
 
 
+def _plain(spec: str) -> bool:
+    """The solver of ``name[/form][@tolerance]`` solves the plain problem ``Mx = b``."""
+    return get_solver(_parse_solver(spec)[0]).plain
+
+
+def _matrix_free(spec: str) -> bool:
+    """The solver of ``name[/form][@tolerance]`` solves that form without a factorization."""
+    name, form, _ = _parse_solver(spec)
+    solver = get_solver(name)
+    return solver.plan("complementarity", form)[1] in solver.matrix_free
+
+
+def _floor(spec: str) -> bool:
+    """A plain solve that is not a baseline: the linear-solve floor of the tables."""
+    solver = get_solver(_parse_solver(spec)[0])
+    return solver.plain and not solver.baseline
+
+
 def best_qp(record: dict[str, Any]) -> tuple[str, dict[str, Any]] | None:
     """The fastest verified QP solver of a snapshot (median setup+solve)."""
-    rows = [(s, r) for s, r in record["solvers"].items() if _parse_solver(s)[0] not in PLAIN_SOLVERS and r["verified"]]
+    rows = [(s, r) for s, r in record["solvers"].items() if not _plain(s) and r["verified"]]
     return min(rows, key=lambda sr: sr[1]["solve"]["median"]) if rows else None
 
 
@@ -243,8 +242,7 @@ def _step(record: dict[str, Any]) -> tuple[float | None, float | None, float]:
     """(step seconds with the best verified QP, QP/linear ratio, detect+assemble seconds)."""
     da = record["detect"]["median"] + record["assemble"]["median"]
     best = best_qp(record)
-    floors = [row["solve"]["median"] for spec, row in record["solvers"].items()
-              if _parse_solver(spec)[0] == "linear" and row["verified"]]
+    floors = [row["solve"]["median"] for spec, row in record["solvers"].items() if _floor(spec) and row["verified"]]
     if best is None:
         return None, None, da
     qp = best[1]["solve"]["median"]
@@ -298,7 +296,7 @@ def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
     ]
     for r in records:
         best = best_qp(r)
-        floors = [row for spec, row in r["solvers"].items() if _parse_solver(spec)[0] == "linear" and row["verified"]]
+        floors = [row for spec, row in r["solvers"].items() if _floor(spec) and row["verified"]]
         lin = min(floors, key=lambda row: row["solve"]["median"]) if floors else None
         da = r["detect"]["median"] + r["assemble"]["median"]
         if best:
@@ -391,7 +389,7 @@ def profile_step(dim: int, n: int, seed: int, solver: str, tolerance: float, cac
 
     def step() -> None:
         active, b = _detect(cells, dim == 2)
-        solve_system(build_system(cells, active, b), cells, solver=name, form=form, tolerance=tol or tolerance)
+        solve_system(build_system(cells, active, b), solver=name, form=form, tolerance=tol or tolerance)
 
     prof = cProfile.Profile()
     prof.runcall(step)
@@ -410,7 +408,6 @@ def profile_step(dim: int, n: int, seed: int, solver: str, tolerance: float, cac
 #: the 3D Delassus operator 0.5 s at 10⁴ cells and more than 8 minutes at 10⁵ (exponent > 3);
 #: a factorization cannot be interrupted, so the benchmark must not start one it cannot finish.
 EXTRAPOLATION_EXPONENT = {"iterative": 1.5, 2: 2.0, 3: 3.0}
-ITERATIVE = ("cg", "cg_euclidean", "bbpgd", "mprgp")
 
 
 def _too_slow(previous: dict[str, Any] | None, n: int, solvers: list[str], limit: float) -> dict[str, str]:
@@ -426,8 +423,7 @@ def _too_slow(previous: dict[str, Any] | None, n: int, solvers: list[str], limit
         row = previous["solvers"].get(spec)
         if row is None:
             continue
-        name, form, _ = _parse_solver(spec)
-        kind = "iterative" if name in ITERATIVE or form == "lsmr" else previous["dim"]
+        kind = "iterative" if _matrix_free(spec) else previous["dim"]
         guess = row["solve"]["median"] * (n / previous["cells"]) ** EXTRAPOLATION_EXPONENT[kind]
         if guess > limit:
             out[spec] = f"{row['solve']['median']:.3g} s at {previous['cells']} cells, extrapolated {guess:.3g} s > {limit:g} s"
@@ -440,8 +436,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--dims", type=int, nargs="+", default=[2, 3], choices=[2, 3])
     p.add_argument("--repeats", type=int, default=3, help="timed repeats of each phase (median, min, max)")
     p.add_argument("--solvers", nargs="+", default=list(DEFAULT_SOLVERS),
-                   help="linear (LU), linear/lsmr, a baseline (cg, cg_euclidean, bbpgd) or a qpsolvers backend with an optional /primal or "
-                        "/contact form; @TOL sets that solver's tolerance (e.g. clarabel/primal@1e-9)")
+                   help=f"solvers ({', '.join(available_solvers(include_baselines=True))}) with an optional /FORM "
+                        "(e.g. linear/primal: LSMR instead of LU; osqp/contact); @TOL sets that solver's tolerance "
+                        "(e.g. clarabel/primal@1e-9)")
     p.add_argument("--tolerance", type=float, default=TARGET_ERROR, help="tolerance handed to the solvers")
     p.add_argument("--time-limit", type=float, default=120.0, help="seconds per QP solve, where the backend supports it")
     p.add_argument("--slow-limit", type=float, default=120.0,

@@ -5,13 +5,19 @@ then each *method* — a solver with a formulation and a form — solves it at e
 the run is timed (median of repeats, setup and solve apart) and measured against a high-accuracy
 reference of the same formulation (model.md, "Measuring error"). Methods:
 
+every registered solver (:mod:`qpcontact.solvers`, baselines included) × each formulation and
+form it declares:
+
 - ``linear``: the plain minimum-W-norm solve (formulation ``linear``: ``Mx = b``, may pull);
 - ``cg``, ``cg_euclidean``: CG on the normal equations from zero (CellModeller; in the
   kinetic-energy metric, and in raw impulses as CellModeller runs it), also formulation ``linear``;
 - ``bbpgd``: projected gradient with Barzilai–Borwein steps on the contact-space complementarity
-  problem;
+  problem; ``mprgp``: the built-in matrix-free solver of the same problem;
 - every installed qpsolvers backend × formulation (``complementarity``, ``least_squares``) × form
   (``primal``, ``contact``); dense-only backends only on scenes with few unknowns.
+
+Every run goes through :func:`qpcontact.resolve.solve_system`, so each answer passes the same
+acceptance checks.
 
 Every run becomes a row of the CSV, failures and time-outs included. A run *succeeds* when the
 solver says it converged (and passes the package's own acceptance checks) and its answer is
@@ -42,16 +48,12 @@ from typing import Any, Callable
 import numpy as np
 import qpsolvers
 
-from ..resolve import metrics
-from ..solvers.baselines import BASELINES, solve_baseline
-from ..geometry.cells import Cells
-from ..geometry.contacts import colliding, find_contacts
-from ..solvers.linear import solve_min_norm
-from ..solvers.qpsolvers_bridge import CONTACT_SPACE_SOLVERS, FORMS, FORMULATIONS
-from ..resolve.resolve import ACCEPT_FACTOR, solve_system
+from ..assembly import ContactSystem, build_system
+from ..geometry import Cells, colliding, find_contacts
+from ..resolve import ACTIVE_THRESHOLD, metrics, reference_solution, solve_system
+from ..solvers import QP_FORMS, available_solvers, get_solver, solve_min_norm
+from ..solvers.baselines import bbpgd
 from .scenes import make_scene
-from ..assembly.system import ContactSystem, build_system
-from ..resolve.validation import ACTIVE_THRESHOLD, reference_solution
 
 #: A run is accurate when its distance to the reference is at most this many times the tolerance
 #: (with the floor ``ACCURACY_FLOOR``: the references themselves are good to about 1e-9).
@@ -121,22 +123,18 @@ class Method:
 
 
 def all_methods(solvers: list[str] | None = None) -> list[Method]:
-    """Methods for these solver names (default: linear, the baselines, the built-in MPRGP and
-    every installed qpsolvers backend)."""
-    names = solvers or ["linear", *BASELINES, *CONTACT_SPACE_SOLVERS, *sorted(qpsolvers.available_solvers)]
+    """Methods for these solver names (default: every installed solver, baselines included, in
+    registry order): each formulation and form the solver declares, except that the plain
+    solvers run in their default form only."""
+    names = solvers or available_solvers(include_baselines=True)
     out = []
     for name in names:
-        if name == "linear":
-            out.append(Method("linear", "linear", "contact"))
-        elif name in ("cg", "cg_euclidean"):
-            out.append(Method(name, "linear", "normal_equations"))
-        elif name == "bbpgd" or name in CONTACT_SPACE_SOLVERS:
-            out.append(Method(name, "complementarity", "contact"))
-        elif name in qpsolvers.available_solvers:
-            out += [Method(name, f, form) for f in FORMULATIONS for form in FORMS]
-        else:
+        if name not in available_solvers(include_baselines=True):
             raise SystemExit(f"qpcontact compare: unknown or uninstalled solver {name!r}; "
-                             f"known: linear, {', '.join((*BASELINES, *CONTACT_SPACE_SOLVERS, *sorted(qpsolvers.available_solvers)))}")
+                             f"known: {', '.join(available_solvers(include_baselines=True))}")
+        spec = get_solver(name)
+        forms = spec.forms[:1] if spec.plain else spec.forms
+        out += [Method(name, f, form) for f in spec.formulations for form in forms]
     return out
 
 
@@ -162,7 +160,7 @@ def complementarity_reference(system: ContactSystem) -> tuple[np.ndarray, float]
     complementarity residual of 1e-12, started from its own contact impulses; the refinement is
     kept only if it certifies a smaller residual ``‖min(λ̃, B̃ỹ − b̃)‖∞`` (with ``ỹ = B̃ᵀλ̃``, λ̃ ≥ 0)."""
     y = reference_solution(system, "complementarity")
-    lam = solve_min_norm(system.matrix.T.tocsr(), y, tol=1e-12, method="lsmr").y
+    lam = solve_min_norm(system.matrix.T.tocsr(), y, tolerance=1e-12, method="lsmr").y
     residual = max(metrics.complementarity_residual(system, y, lam), float(np.max(-lam, initial=0.0)))
     refined = solve_baseline_from(system, np.maximum(lam, 0.0))
     if refined is not None and refined[1] < residual:
@@ -171,9 +169,7 @@ def complementarity_reference(system: ContactSystem) -> tuple[np.ndarray, float]
 
 
 def solve_baseline_from(system: ContactSystem, initial: np.ndarray) -> tuple[np.ndarray, float] | None:
-    from ..solvers.baselines import bbpgd
-
-    out = bbpgd(system, tol=1e-12, initial=initial, max_iterations=50_000, time_limit=60.0)
+    out = bbpgd(system.matrix, system.rhs, tolerance=1e-12, initial=initial, max_iterations=50_000, time_limit=60.0)
     return (out.y, out.residual) if out.converged else None
 
 
@@ -184,7 +180,7 @@ def prepare(case: SceneCase) -> Prepared:
     active, b = colliding(find_contacts(cells), position_correction=case.position_correction, dt=case.dt)
     system = build_system(cells, active, b)
     t1 = time.perf_counter()
-    lin = solve_min_norm(system.matrix, system.rhs, tol=1e-10)  # as reference_solution does
+    lin = solve_min_norm(system.matrix, system.rhs, tolerance=1e-10)  # as reference_solution does
     comp, residual = complementarity_reference(system)
     references = {"linear": lin.y, "least_squares": reference_solution(system, "least_squares"), "complementarity": comp}
     lam_scale = max(float(np.max(np.abs(lin.lam), initial=0.0)), 1e-300)
@@ -196,15 +192,9 @@ def prepare(case: SceneCase) -> Prepared:
 # One run
 # ------------------------------------------------------------------------------------------
 def solve_once(prepared: Prepared, method: Method, tolerance: float, time_limit: float) -> dict[str, Any]:
-    """Solve once; returns y, lam, converged, status, iterations, setup, solve, message."""
-    system = prepared.system
-    if method.solver in BASELINES:
-        out = solve_baseline(system, method.solver, tolerance=tolerance, time_limit=time_limit)
-        return {"y": out.y, "lam": out.lam, "converged": out.converged, "status": out.status,
-                "iterations": out.iterations, "setup": 0.0, "solve": out.seconds,
-                "message": "" if out.converged else f"{method.solver} stopped: {out.status} (residual {out.residual:.3g})"}
-    formulation = "complementarity" if method.formulation == "linear" else method.formulation
-    y, lam, info = solve_system(system, prepared.cells, solver=method.solver, formulation=formulation,
+    """Solve once through :func:`~qpcontact.resolve.solve_system`; returns y, lam, converged,
+    status, iterations, setup, solve, message."""
+    y, lam, info = solve_system(prepared.system, solver=method.solver, formulation=method.formulation,
                                 form=method.form, tolerance=tolerance, time_limit=time_limit)
     return {"y": y, "lam": lam, "converged": bool(info["converged"]), "status": info["status"],
             "iterations": info["iterations"], "setup": info["setup"], "solve": info["solve"], "message": info["message"]}
@@ -263,7 +253,6 @@ def measure(prepared: Prepared, method: Method, tolerance: float, y: np.ndarray 
         return dict.fromkeys(keys, nan)
     system = prepared.system
     reference = prepared.references[method.formulation]
-    objective = "least_squares" if method.formulation == "linear" else method.formulation
     impulses = system.to_impulses(y)
     physics = metrics.physics(prepared.cells, system, impulses, None if lam is None else system.to_contact_impulses(lam))
     comp = method.formulation == "complementarity" and lam is not None
@@ -272,7 +261,7 @@ def measure(prepared: Prepared, method: Method, tolerance: float, y: np.ndarray 
         "complementarity": metrics.complementarity_residual(system, y, lam) if comp else nan,
         "duality_gap": metrics.duality_gap(system, y, lam) if comp else nan,
         "distance": metrics.distance(y, reference),
-        "objective_gap": metrics.objective_gap(system, objective, y, reference),
+        "objective_gap": metrics.objective_gap(system, method.formulation, y, reference),
         "distance_complementarity": metrics.distance(y, prepared.references["complementarity"]),
         "distance_linear": metrics.distance(y, prepared.references["linear"]),
         "momentum_change": physics["momentum_change"],
@@ -419,7 +408,7 @@ def form_table(rows: list[dict[str, Any]]) -> str:
     lines = ["| backend | formulation | primal success | contact success | median time primal/contact "
              "| median distance primal/contact |", "|---|---|---|---|---|---|"]
     index = {(r["scene"], r["tolerance"], r["solver"], r["formulation"], r["form"]): r for r in rows}
-    for solver, formulation in dict.fromkeys((r["solver"], r["formulation"]) for r in rows if r["form"] in FORMS):
+    for solver, formulation in dict.fromkeys((r["solver"], r["formulation"]) for r in rows if r["form"] in QP_FORMS):
         pairs = [(index.get((sc, t, solver, formulation, "primal")), index.get((sc, t, solver, formulation, "contact")))
                  for sc, t in dict.fromkeys((r["scene"], r["tolerance"]) for r in rows)]
         pairs = [(p, c) for p, c in pairs if p is not None and c is not None]
@@ -594,8 +583,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="qpcontact compare", description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", help="comma-separated scene names or families (default: the default set; "
                         f"known: {', '.join(ALL_SCENES)})")
-    parser.add_argument("--solvers", help="comma-separated solvers (default: linear, cg, cg_euclidean, bbpgd, mprgp and "
-                        "every installed qpsolvers backend)")
+    parser.add_argument("--solvers", help="comma-separated solvers (default: every installed one, baselines included: "
+                        f"{', '.join(available_solvers(include_baselines=True))})")
     parser.add_argument("--tolerances", default=None, help="comma-separated tolerances (default 1e-3,1e-6,1e-9)")
     parser.add_argument("--repeats", type=int, default=3, help="repeats per run; the median time is kept (default 3)")
     parser.add_argument("--time-limit", type=float, default=5.0,
@@ -632,7 +621,7 @@ def main(argv: list[str] | None = None) -> int:
                                f"| {'yes' if prepared.all_active else 'no'} | {prepared.reference_residual:.1e} "
                                f"| {1e3 * prepared.assemble_seconds:.3g} | {1e3 * prepared.reference_seconds:.3g} |")
             for method in methods:
-                dense_only = method.solver in qpsolvers.dense_solvers and method.solver not in qpsolvers.sparse_solvers
+                dense_only = get_solver(method.solver).dense
                 for tolerance in tolerances:
                     bar.set_description(f"{case.name}: {method.label} {tolerance:g}")
                     if dense_only and n > DENSE_MAX_UNKNOWNS:

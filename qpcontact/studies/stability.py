@@ -51,16 +51,12 @@ from typing import Any
 
 import numpy as np
 
-from ..resolve import metrics
-from .catalogue import CATALOGUE, Case
-from ..geometry.cells import Cells
-from ..geometry.contacts import Contacts, colliding, find_contacts
+from ..assembly import ContactSystem, build_system
 from ..errors import QPContactError
-from ..solvers.linear import solve_min_norm
-from ..solvers.qpsolvers_bridge import FORMULATIONS, available_solvers
-from ..resolve.resolve import DEFAULT_FORM, resolve
-from ..assembly.system import ContactSystem, build_system
-from ..resolve.validation import reference_solution
+from ..geometry import Cells, Contacts, colliding, find_contacts
+from ..resolve import metrics, reference_solution, resolve
+from ..solvers import DEFAULT_FORM, FORMULATIONS, QP_FORMULATIONS, available_solvers, get_solver, solve_min_norm
+from .catalogue import CATALOGUE, Case
 
 #: Solver tolerance of every run (dimensionless).
 TOLERANCE = 1e-6
@@ -120,24 +116,26 @@ def prepare(case: Case, seed: int = 0, size: dict[str, Any] | None = None) -> Pr
         return Prepared(case, cells, contacts, None, {}, {}, None, 0.0, 0.0)
     system = build_system(cells, active, b)
     t0 = time.perf_counter()
-    lin = solve_min_norm(system.matrix, system.rhs, tol=REFERENCE_TOLERANCE)
+    lin = solve_min_norm(system.matrix, system.rhs, tolerance=REFERENCE_TOLERANCE)
     t1 = time.perf_counter()
-    with_cond = solve_min_norm(system.matrix, system.rhs, tol=REFERENCE_TOLERANCE, estimate_condition=True)
+    with_cond = solve_min_norm(system.matrix, system.rhs, tolerance=REFERENCE_TOLERANCE, estimate_condition=True)
     t2 = time.perf_counter()
     references = {"linear": lin.y}
-    for formulation in FORMULATIONS:
+    for formulation in QP_FORMULATIONS:
         references[formulation] = reference_solution(system, formulation)
     pen = {name: metrics.penetration(system, y) for name, y in references.items()}
     return Prepared(case, cells, contacts, system, references, pen, with_cond.condition_estimate, t2 - t1, t1 - t0)
 
 
 def runs(solvers: list[str], formulations: list[str], forms: list[str]) -> list[tuple[str, str, str]]:
-    """(solver, formulation, form) triples: the plain linear solve once, every QP backend with
-    every formulation and form."""
-    out = []
+    """(solver, formulation, form) triples: a plain solver (formulation ``"linear"``) once in its
+    default form, every other solver with every formulation and form asked for, those it does not
+    take included (their documented error is part of the report)."""
+    out: list[tuple[str, str, str]] = []
     for solver in solvers:
-        if solver == "linear":
-            out.append(("linear", "linear", "contact"))
+        spec = get_solver(solver)
+        if spec.plain:
+            out.append((solver, *spec.plan("linear")))
             continue
         for formulation in formulations:
             for form in forms:
@@ -184,7 +182,7 @@ def run_one(prep: Prepared, solver: str, formulation: str, form: str, scale: boo
     times are the medians."""
     row: dict[str, Any] = {"case": prep.case.name, "family": prep.case.family, "solver": solver,
                            "formulation": formulation, "form": form, "scale": scale}
-    kwargs = {} if solver == "linear" else {"formulation": formulation, "form": form}
+    kwargs = {"formulation": formulation, "form": form}
     t0 = time.perf_counter()
     try:
         result = resolve(prep.cells, solver=solver, contacts=prep.contacts, tolerance=TOLERANCE, time_limit=time_limit,
@@ -281,8 +279,8 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
 
 
 def _column(row: dict[str, Any]) -> str:
-    if row["solver"] == "linear":
-        return "linear"
+    if row["formulation"] == "linear":
+        return row["solver"]
     short = {"complementarity": "C", "least_squares": "LS"}[row["formulation"]]
     return f"{row['solver']} {short}" + ("" if row["form"] == DEFAULT_FORM[row["formulation"]] else f" ({row['form']})")
 
@@ -393,7 +391,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="qpcontact stability", description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", default="*", help="fnmatch pattern(s) of case names, comma separated")
     parser.add_argument("--solvers", default=",".join(available_solvers()), help="comma-separated solver names")
-    parser.add_argument("--formulations", default=",".join(FORMULATIONS))
+    parser.add_argument("--formulations", default=",".join(QP_FORMULATIONS),
+                        help=f"formulations of the QP solvers (plain solvers always run the plain problem); known: {FORMULATIONS}")
     parser.add_argument("--forms", default="primal,contact", help="QP forms to run (primal, contact)")
     parser.add_argument("--scaling", default="on,off", help="on, off or on,off")
     parser.add_argument("--time-limit", type=float, default=20.0, help="solver time limit [s] (where supported)")
