@@ -35,11 +35,11 @@ def test_quick_bench_writes_the_table_plot_and_data(tmp_path):
     assert "Fitted scaling exponent" in text
     assert (out / "img" / "performance.png").stat().st_size > 1000
     data = json.loads((out / "data" / "performance.json").read_text())
-    assert {(r["dim"], r["cells"]) for r in data["records"]} == {(2, 300), (2, 1000), (3, 300), (3, 1000)}
+    assert {(r["dimensions"], r["cells"]) for r in data["records"]} == {(2, 300), (2, 1000), (3, 300), (3, 1000)}
     for record in data["records"]:
         assert record["peak_rss_mib"] > 0
         for spec, row in record["solvers"].items():
-            assert row["verified"], (record["dim"], record["cells"], spec, row)
+            assert row["verified"], (record["dimensions"], record["cells"], spec, row)
 
 
 def test_scaling_exponent_of_a_power_law():

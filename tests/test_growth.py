@@ -123,7 +123,7 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
 @pytest.mark.parametrize("change, message", [
     ({"cfl": -1.0}, "cfl: must be finite and > 0"),
     ({"overlap_limit": float("nan")}, "overlap_limit: must be finite and >= 0"),
-    ({"cells": 0}, "cells: must be an integer >= 1"),
+    ({"n_cells": 0}, "n_cells: must be an integer >= 1"),
     ({"dimensions": 4}, "dimensions: must be 2 or 3"),
     ({"position_correction": 1.5}, r"position_correction: must be in \[0, 1\]"),
 ])

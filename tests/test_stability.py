@@ -15,7 +15,7 @@ from qpcontact.studies.catalogue import CATALOGUE, hub, long_chain
 from qpcontact.studies.stability import KKT_LIMIT, check, main, prepare
 
 #: Reduced sizes of the large cases.
-SMALL = {"hub_1000": {"n": 60}, "chain_10000": {"n": 200}}
+SMALL = {"hub_1000": {"n_neighbours": 60}, "chain_10000": {"n_cells": 200}}
 CASES = list(CATALOGUE)
 
 
@@ -94,9 +94,9 @@ def test_unit_invariance():
 
 
 def test_large_cases_at_reduced_size_match_full_size_structure():
-    chain = long_chain(0, n=300)
+    chain = long_chain(0, n_cells=300)
     assert len(q.find_contacts(chain)) == 299  # end to end: one tip contact per neighbour pair
-    small_hub = hub(0, n=80)
+    small_hub = hub(0, n_neighbours=80)
     contacts = q.find_contacts(small_hub)
     assert np.count_nonzero((contacts.cell_a == 0) | (contacts.cell_b == 0)) == 80
 

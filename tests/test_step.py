@@ -110,7 +110,7 @@ def test_total_linear_momentum_stays_zero_in_inertial_colony():
 def test_largest_overlap_stays_bounded_over_a_2d_run_with_position_correction():
     from qpcontact.colony.simulate import Settings, run_colony
 
-    run = run_colony(Settings(cells=150), progress=False)
+    run = run_colony(Settings(n_cells=150), progress=False)
     assert not run.error
     assert run.colony.cells.n >= 150
     assert len(run.history["max_overlap"]) > 100

@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry.cells import Cells
+from ..geometry import Cells, capsule_volume
 from ..errors import InvalidArgumentError
 from .step import StepResult, rotate, step
 
@@ -91,8 +91,9 @@ class Colony:
 
 
 def volumes(cells: Cells) -> np.ndarray:
-    """(N,) capsule volumes ``π ρ² l + 4/3 π ρ³`` [length³]."""
-    return np.pi * cells.radii**2 * (cells.lengths + 4.0 / 3.0 * cells.radii)
+    """(N,) capsule volumes ``π ρ² l + 4/3 π ρ³`` [length³]
+    (:func:`qpcontact.geometry.capsule_volume`)."""
+    return capsule_volume(cells.lengths, cells.radii)
 
 
 def growth_step(colony: Colony, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -187,7 +188,7 @@ def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.n
 
     The growth drive (:func:`growth_drive` of :func:`growth_step`) enters as the growth momentum
     — overdamped, as the growth column of ``drive``; inertial, by setting ``g`` (growth is a
-    biological motor, not inertia) — then :func:`qpcontact.step.step` with ``step_options``.
+    biological motor, not inertia) — then :func:`qpcontact.colony.step` with ``step_options``.
     ``drive`` adds user-given momenta (its growth column is ignored). Afterwards masses and
     growth inertias grow with the volume including what is owed (constant density), and the
     owed length drops by what was paid. Returns the colony at ``t + dt`` and the step's result

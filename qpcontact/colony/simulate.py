@@ -2,15 +2,15 @@
 
 Units: lengths in µm (cells of radius 0.5 µm dividing at a cylinder length of 4 µm), time in
 mean doubling times (growth rate ln 2), masses in arbitrary units (mass = volume, growth inertia
-``G`` = ``--growth-inertia`` × mass). Every step: :func:`qpcontact.growth.grow` (growth drive,
-contact solve, move), then :func:`qpcontact.growth.divide`; the step size follows the colony's
-expansion (:func:`qpcontact.growth.expansion_time_step`), and a step that turns some cell too
+``G`` = ``--growth-inertia`` × mass). Every step: :func:`qpcontact.colony.grow` (growth drive,
+contact solve, move), then :func:`qpcontact.colony.divide`; the step size follows the colony's
+expansion (:func:`qpcontact.colony.expansion_time_step`, with the run's dimensions), and a step that turns some cell too
 fast (or, with ``--overlap-limit``, leaves too large an overlap) is retried with half the step
 (:func:`grow_with_retries`).
 
 Outputs in ``--out`` (default ``colony-run``):
 
-- ``snapshots/step_NNNNNN.npz``: colony snapshots (format: :mod:`qpcontact.snapshots`), every
+- ``snapshots/step_NNNNNN.npz``: colony snapshots (format: :mod:`qpcontact.colony.snapshots`), every
   ``--snapshot-every`` steps and the last one;
 - ``history.csv``: one row per step (time, dt, cells, contacts, largest/mean overlap as a
   fraction of the diameter, solver seconds, step seconds, residuals);
@@ -32,9 +32,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
-from ..geometry.cells import Cells
+from ..geometry import Cells, capsule_volume
 from ..errors import InvalidArgumentError, QPContactError, SolverFailedError
 from .growth import Colony, divide, expansion_time_step, grow
 from .snapshots import load_colony, save_colony
@@ -50,7 +49,7 @@ HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mea
 class Settings:
     """Everything that defines a colony run (the command-line options, as values)."""
 
-    cells: int = 2000
+    n_cells: int = 2000
     dimensions: int = 2
     solver: str = "clarabel"
     formulation: str = "complementarity"
@@ -86,7 +85,7 @@ class Settings:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and np.isfinite(value) and (value > 0 if name in positive else value >= 0)):
                 raise InvalidArgumentError(f"{name}: must be finite and {'> 0' if name in positive else '>= 0'}, got {value!r}")
-        for name in ("cells", "max_steps", "max_halvings"):
+        for name in ("n_cells", "max_steps", "max_halvings"):
             value = getattr(self, name)
             if not (isinstance(value, int) and value >= (0 if name == "max_halvings" else 1)):
                 raise InvalidArgumentError(f"{name}: must be an integer >= {0 if name == 'max_halvings' else 1}, got {value!r}")
@@ -111,14 +110,14 @@ class Run:
 def founder(settings: Settings) -> Colony:
     """One cell at the origin along x (on the substrate in 3D), half the division length long."""
     z = settings.radius if settings.dimensions == 3 else 0.0
-    volume = np.pi * settings.radius**2 * (settings.division_length / 2 + 4 / 3 * settings.radius)
+    volume = capsule_volume(settings.division_length / 2, settings.radius)
     cell = Cells(centers=[[0.0, 0.0, z]], axes=[[1.0, 0.0, 0.0]], lengths=settings.division_length / 2,
                  radii=settings.radius, masses=volume, growth_inertia=settings.growth_inertia * volume)
     return Colony.founder(cell, settings.rate)
 
 
 def grow_with_retries(colony: Colony, dt: float, settings: Settings, **grow_options: Any) -> tuple[Colony, Any, float, int]:
-    """:func:`qpcontact.growth.grow` by ``dt``, rejected and retried with half the step (up to
+    """:func:`qpcontact.colony.grow` by ``dt``, rejected and retried with half the step (up to
     ``max_halvings`` times; the last attempt is kept) when
 
     - the contact solve turns some cell so fast that its tips would move more than ``cfl``
@@ -152,7 +151,7 @@ def turning_reach(cells: Cells, dt: float) -> float:
 
 def run_colony(settings: Settings, *, start: Colony | None = None, progress: bool = True,
                snapshot_dir: Path | None = None, snapshot_every: int = 0, frame_growth: float = 0.0) -> Run:
-    """Grow a colony until it has ``settings.cells`` cells (or ``max_steps`` steps).
+    """Grow a colony until it has ``settings.n_cells`` cells (or ``max_steps`` steps).
 
     Args:
         settings: the run's parameters.
@@ -168,6 +167,8 @@ def run_colony(settings: Settings, *, start: Colony | None = None, progress: boo
         compressed to a negative length), ends the run early with ``error`` set (that step is
         not applied).
     """
+    from tqdm import tqdm  # the progress bar: only when a colony is run
+
     rng = np.random.default_rng(settings.seed)
     colony = founder(settings) if start is None else start
     planar = settings.dimensions == 2
@@ -180,12 +181,12 @@ def run_colony(settings: Settings, *, start: Colony | None = None, progress: boo
         options["damping"] = settings.damping
     history: dict[str, list[float]] = {name: [] for name in HISTORY_FIELDS}
     frames = [(colony.time, colony.cells)] if frame_growth else []
-    bar = tqdm(total=settings.cells, initial=colony.cells.n, unit="cell", disable=not progress, file=sys.stderr)
+    bar = tqdm(total=settings.n_cells, initial=colony.cells.n, unit="cell", disable=not progress, file=sys.stderr)
     error = ""
     t_start = time.perf_counter()
     step = 0
-    while colony.cells.n < settings.cells and step < settings.max_steps:
-        dt = expansion_time_step(colony, max_dt=settings.max_dt, cfl=settings.cfl)
+    while colony.cells.n < settings.n_cells and step < settings.max_steps:
+        dt = expansion_time_step(colony, max_dt=settings.max_dt, cfl=settings.cfl, dimensions=settings.dimensions)
         drive = None
         if not planar and settings.sink_speed:
             drive = np.zeros((colony.cells.n, 7))
@@ -239,7 +240,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     d = Settings()
     p = argparse.ArgumentParser(prog="qpcontact simulate", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--cells", type=int, default=d.cells, help="grow until the colony has this many cells")
+    p.add_argument("--cells", dest="n_cells", type=int, default=d.n_cells, help="grow until the colony has this many cells")
     p.add_argument("--dimensions", type=int, choices=(2, 3), default=d.dimensions,
                    help="2: monolayer in the xy-plane (planar unknowns only); 3: a biofilm on a substrate plane z = 0")
     p.add_argument("--solver", default=d.solver, help=f"an installed solver: {', '.join(available_solvers())}")

@@ -1,4 +1,7 @@
-"""Colony snapshots as NPZ files (one per saved step), loadable back into a :class:`Colony`.
+"""Colony snapshots as NPZ files (one per saved step), loadable back into a :class:`Colony`; and
+the one mapping between :class:`~qpcontact.Cells` and NPZ arrays (:func:`cell_arrays`,
+:func:`cells_from_arrays`), which the benchmark's scene cache uses too (:func:`save_cells`,
+:func:`load_cells`: the cell arrays alone, same names).
 
 Format (``numpy.savez_compressed``; every array is plain NumPy, no pickles):
 
@@ -32,11 +35,12 @@ from __future__ import annotations
 
 import dataclasses
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
-from ..geometry.cells import Cells
 from ..errors import InvalidArgumentError
+from ..geometry import Cells
 from .growth import Colony
 
 FORMAT = "qpcontact-colony"
@@ -45,11 +49,38 @@ CELL_FIELDS = tuple(f.name for f in dataclasses.fields(Cells))
 COLONY_FIELDS = ("ids", "parent_ids", "rates", "owed")
 
 
+def cell_arrays(cells: Cells) -> dict[str, np.ndarray]:
+    """The arrays of :class:`~qpcontact.Cells`, by field name (:data:`CELL_FIELDS`)."""
+    return {name: getattr(cells, name) for name in CELL_FIELDS}
+
+
+def cells_from_arrays(data: Mapping[str, np.ndarray]) -> Cells:
+    """:class:`~qpcontact.Cells` from arrays named as its fields (e.g. an opened NPZ file)."""
+    return Cells(**{name: data[name] for name in CELL_FIELDS})
+
+
+def save_cells(path: str | Path, cells: Cells) -> Path:
+    """Write the cell arrays alone to ``path`` (``.npz``, uncompressed; parent folders are
+    created). Written to a temporary file first, so a reader never sees half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, **cell_arrays(cells))
+    tmp.replace(path)
+    return path
+
+
+def load_cells(path: str | Path) -> Cells:
+    """Read cells written by :func:`save_cells` (or the cell arrays of a colony snapshot)."""
+    with np.load(Path(path), allow_pickle=False) as data:
+        return cells_from_arrays(data)
+
+
 def save_colony(path: str | Path, colony: Colony, step: int = -1) -> Path:
     """Write ``colony`` to ``path`` (an ``.npz`` file; parent folders are created)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = {name: getattr(colony.cells, name) for name in CELL_FIELDS}
+    arrays = cell_arrays(colony.cells)
     arrays.update({name: getattr(colony, name) for name in COLONY_FIELDS})
     np.savez_compressed(path, format=np.array(FORMAT), version=np.array(VERSION), time=np.array(colony.time),
                         step=np.array(step), next_id=np.array(colony.next_id), **arrays)
@@ -71,7 +102,7 @@ def load_colony(path: str | Path) -> tuple[Colony, int]:
         missing = [k for k in (*CELL_FIELDS, *COLONY_FIELDS, "time", "step", "next_id") if k not in data]
         if missing:
             raise InvalidArgumentError(f"{path}: snapshot misses {missing}")
-        cells = Cells(**{name: data[name] for name in CELL_FIELDS})
+        cells = cells_from_arrays(data)
         colony = Colony(cells, data["ids"], data["parent_ids"], data["rates"], data["owed"],
                         time=float(data["time"]), next_id=int(data["next_id"]))
         return colony, int(data["step"])

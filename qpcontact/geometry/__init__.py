@@ -3,6 +3,7 @@
 The lowest wing: it imports nothing of qpcontact but :mod:`qpcontact.errors`.
 
 - :mod:`.cells`: :class:`Cells`, N capsules as arrays (positions, shapes, masses, momenta);
+- :mod:`.shapes`: the capsule volume (and mass) and the inertia tensor, one formula each;
 - :mod:`.contacts`: :func:`find_contacts` (KD-tree broad phase, vectorized segment narrow
   phase), :class:`Contacts`, :func:`colliding` (the contacts to resolve and their ``b``);
 - :mod:`.surfaces`: static planes (:class:`Plane`, :func:`substrate`, :func:`channel`) as
@@ -21,10 +22,11 @@ from .contacts import (
     relative_normal_velocity,
     required_velocity_change,
 )
+from .shapes import capsule_mass, capsule_volume, inertia_times
 from .surfaces import Plane, channel, plane_contacts, substrate
 
 __all__ = [
-    "PARALLEL_SINE", "Cells", "Contacts", "Plane", "candidate_pairs", "channel",
-    "colliding", "concatenate", "find_contacts", "narrow_phase", "perpendicular_basis",
+    "PARALLEL_SINE", "Cells", "Contacts", "Plane", "candidate_pairs", "capsule_mass", "capsule_volume", "channel",
+    "colliding", "concatenate", "find_contacts", "inertia_times", "narrow_phase", "perpendicular_basis",
     "plane_contacts", "relative_normal_velocity", "required_velocity_change", "substrate",
 ]

@@ -1,10 +1,10 @@
 """``qpcontact bench``: time each phase of a contact step at colony scale.
 
-For each colony snapshot (2D monolayer and 3D biofilm from :mod:`qpcontact.scenes`, 10³–10⁵
+For each colony snapshot (2D monolayer and 3D biofilm from :mod:`qpcontact.studies.scenes`, 10³–10⁵
 cells by default) the benchmark times, with repeats (median, min, max):
 
-- *detect*: :func:`~qpcontact.contacts.find_contacts` + :func:`~qpcontact.contacts.colliding`;
-- *assemble*: :func:`~qpcontact.system.build_system`;
+- *detect*: :func:`~qpcontact.geometry.find_contacts` + :func:`~qpcontact.geometry.colliding`;
+- *assemble*: :func:`~qpcontact.assembly.build_system`;
 - *solve*, per solver, every one through :func:`~qpcontact.resolve.solve_system` (setup +
   solve, the acceptance checks included): the plain linear solve (the floor; ``linear/primal``
   is its LSMR route), the QP backends, the built-in matrix-free QP solver ``mprgp``
@@ -15,7 +15,7 @@ cells by default) the benchmark times, with repeats (median, min, max):
 - *check*: the error measures of :mod:`qpcontact.resolve.metrics` on one answer.
 
 Every answer is verified, untimed, against a high-accuracy reference: the QP answers against
-:func:`~qpcontact.validation.reference_solution` (relative error ``‖x − x*‖_W/‖x*‖_W``, target
+:func:`~qpcontact.resolve.reference_solution` (relative error ``‖x − x*‖_W/‖x*‖_W``, target
 1e-6), the answers of the plain solvers (linear, CG) against the linear solve at 1e-12. Each snapshot runs in its own
 subprocess, so its peak resident memory (``ru_maxrss``, taken after the timed phases and before
 the verification) is that of one step (with every solver). The scaling exponent of detection + assembly is the slope
@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import cProfile
-import dataclasses
 import datetime
 import io
 import json
@@ -51,6 +50,7 @@ from typing import Any, Callable
 import numpy as np
 
 from ..assembly import build_system
+from ..colony.snapshots import load_cells, save_cells
 from ..geometry import Cells, colliding, find_contacts
 from ..resolve import active_set_polish, metrics, reference_solution, solve_system
 from ..solvers import available_solvers, get_solver, solve_min_norm
@@ -68,18 +68,15 @@ GENERATORS: dict[int, Callable[[int, int], Cells]] = {2: scenes.colony_2d, 3: sc
 # ------------------------------------------------------------------------------------------
 # Scenes (cached: a 10⁵-cell snapshot takes longer to build than to solve)
 # ------------------------------------------------------------------------------------------
-def load_scene(dim: int, n: int, seed: int, cache_dir: Path | None) -> Cells:
-    """The colony snapshot ``colony_{dim}d(n, seed)``, from ``cache_dir`` if built before."""
-    path = None if cache_dir is None else cache_dir / f"colony_{dim}d_{n}_{seed}.npz"
+def load_scene(dimensions: int, n_cells: int, seed: int, cache_dir: Path | None) -> Cells:
+    """The colony snapshot ``colony_{dimensions}d(n_cells, seed)``, from ``cache_dir`` if built
+    before (:func:`qpcontact.colony.snapshots.save_cells`)."""
+    path = None if cache_dir is None else cache_dir / f"colony_{dimensions}d_{n_cells}_{seed}.npz"
     if path is not None and path.exists():
-        with np.load(path) as data:
-            return Cells(**{f.name: data[f.name] for f in dataclasses.fields(Cells)})
-    cells = GENERATORS[dim](n, seed)
+        return load_cells(path)
+    cells = GENERATORS[dimensions](n_cells, seed)
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, **{f.name: getattr(cells, f.name) for f in dataclasses.fields(Cells)})
-        tmp.replace(path)
+        save_cells(path, cells)
     return cells
 
 
@@ -116,15 +113,15 @@ def _detect(cells: Cells, planar: bool):
     return colliding(find_contacts(cells, planar=planar))
 
 
-def run_snapshot(dim: int, n: int, *, seed: int, repeats: int, solvers: list[str], tolerance: float,
+def run_snapshot(dimensions: int, n_cells: int, *, seed: int, repeats: int, solvers: list[str], tolerance: float,
                  time_limit: float | None, cache_dir: Path | None) -> dict[str, Any]:
     """Time and verify one step on one snapshot; returns a JSON-ready record."""
-    cells = load_scene(dim, n, seed, cache_dir)
-    planar = dim == 2
+    cells = load_scene(dimensions, n_cells, seed, cache_dir)
+    planar = dimensions == 2
     (active, b), t_detect = _timed(lambda: _detect(cells, planar), repeats)
     system, t_assemble = _timed(lambda: build_system(cells, active, b), repeats)
     record: dict[str, Any] = {
-        "dim": dim, "cells": cells.n, "contacts": len(active), "unknowns": system.shape[1],
+        "dimensions": dimensions, "cells": cells.n, "contacts": len(active), "unknowns": system.shape[1],
         "detect": _stats(t_detect), "assemble": _stats(t_assemble), "solvers": {},
     }
     answers: dict[str, np.ndarray | None] = {}
@@ -251,35 +248,35 @@ def _step(record: dict[str, Any]) -> tuple[float | None, float | None, float]:
 
 def target_lines(records: list[dict[str, Any]]) -> list[str]:
     """Each target of issue 6 against this run: met, missed, or not measured."""
-    def find(dim: int, n: int) -> dict[str, Any] | None:
-        return next((r for r in records if r["dim"] == dim and r["cells"] == n), None)
+    def find(dimensions: int, n: int) -> dict[str, Any] | None:
+        return next((r for r in records if r["dimensions"] == dimensions and r["cells"] == n), None)
 
     def verdict(ok: bool | None) -> str:
         return "not measured" if ok is None else ("**met**" if ok else "**missed**")
 
     lines = ["| target | measured | verdict |", "|---|---|---|"]
-    for dim, n, limit in ((2, 100000, 5.0), (2, 10000, 0.5), (3, 100000, 20.0)):
-        r = find(dim, n)
+    for dimensions, n, limit in ((2, 100000, 5.0), (2, 10000, 0.5), (3, 100000, 20.0)):
+        r = find(dimensions, n)
         step = _step(r)[0] if r else None
         text = "–" if r is None else ("no verified QP answer" if step is None else f"{step:.3g} s")
-        lines.append(f"| {dim}D, {n} cells: full step ≤ {limit:g} s | {text} | "
+        lines.append(f"| {dimensions}D, {n} cells: full step ≤ {limit:g} s | {text} | "
                      f"{verdict(None if r is None else (step is not None and step <= limit))} |")
-    for dim in (2, 3):
-        r = find(dim, 100000)
+    for dimensions in (2, 3):
+        r = find(dimensions, 100000)
         if r is None:
             continue
         step, ratio, da = _step(r)
-        lines.append(f"| {dim}D, 10⁵ cells: QP ≤ 3× linear solve | "
+        lines.append(f"| {dimensions}D, 10⁵ cells: QP ≤ 3× linear solve | "
                      + ("–" if ratio is None else f"{ratio:.2f}×") + f" | {verdict(None if ratio is None else ratio <= 3)} |")
-        lines.append(f"| {dim}D, 10⁵ cells: detect + assemble < 20 % of the step | "
+        lines.append(f"| {dimensions}D, 10⁵ cells: detect + assemble < 20 % of the step | "
                      + ("–" if step is None else f"{100 * da / step:.0f} % ({da:.3g} s)")
                      + f" | {verdict(None if step is None else da < 0.2 * step)} |")
-        lines.append(f"| {dim}D, 10⁵ cells: peak memory < 4 GiB | {r['peak_rss_mib'] / 1024:.2f} GiB | "
+        lines.append(f"| {dimensions}D, 10⁵ cells: peak memory < 4 GiB | {r['peak_rss_mib'] / 1024:.2f} GiB | "
                      f"{verdict(r['peak_rss_mib'] < 4096)} |")
-    for dim in sorted({r["dim"] for r in records}):
-        rs = [r for r in records if r["dim"] == dim]
+    for dimensions in sorted({r["dimensions"] for r in records}):
+        rs = [r for r in records if r["dimensions"] == dimensions]
         exp = scaling_exponent([r["cells"] for r in rs], [r["detect"]["median"] + r["assemble"]["median"] for r in rs])
-        lines.append(f"| {dim}D: detect + assemble exponent ≤ 1.15 ({rs[0]['cells']}–{rs[-1]['cells']} cells) | "
+        lines.append(f"| {dimensions}D: detect + assemble exponent ≤ 1.15 ({rs[0]['cells']}–{rs[-1]['cells']} cells) | "
                      + ("–" if exp is None else f"{exp:.2f}") + f" | {verdict(None if exp is None else exp <= 1.15)} |")
     return lines
 
@@ -308,10 +305,10 @@ def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
         else:
             qp, ratio, share, step_s = "none verified", "–", "–", "–"
         lines.append(
-            f"| {r['dim']}D | {r['cells']} | {r['contacts']} | {r['unknowns']} | {_fmt(r['detect'])} | {_fmt(r['assemble'])} | "
+            f"| {r['dimensions']}D | {r['cells']} | {r['contacts']} | {r['unknowns']} | {_fmt(r['detect'])} | {_fmt(r['assemble'])} | "
             f"{qp} | {step_s} | {lin['solve']['median']:.3g} | {ratio} | {share} | {r['peak_rss_mib']:.0f} |"
             if lin else
-            f"| {r['dim']}D | {r['cells']} | {r['contacts']} | {r['unknowns']} | {_fmt(r['detect'])} | {_fmt(r['assemble'])} | "
+            f"| {r['dimensions']}D | {r['cells']} | {r['contacts']} | {r['unknowns']} | {_fmt(r['detect'])} | {_fmt(r['assemble'])} | "
             f"{qp} | {step_s} | – | – | {share} | {r['peak_rss_mib']:.0f} |"
         )
     lines += ["", "Targets of issue 6 in this run (step = detect + assemble + the fastest verified QP solve):", "",
@@ -324,33 +321,31 @@ def markdown(records: list[dict[str, Any]], meta: dict[str, Any]) -> str:
             err = "–" if s.get("error") is None else f"{s['error']:.1e}"
             pen = "–" if s.get("penetration") is None else f"{s['penetration']:.1e}"
             check = _fmt(s["check"]) if "check" in s else "–"
-            lines.append(f"| {r['dim']}D | {r['cells']} | {spec} | {_fmt(s['solve'])} | {check} | {s.get('iterations')} | "
+            lines.append(f"| {r['dimensions']}D | {r['cells']} | {spec} | {_fmt(s['solve'])} | {check} | {s.get('iterations')} | "
                          f"{s['status']} | {err} | {pen} | {'yes' if s['verified'] else '**no**'} |")
-    skipped = [f"{r['dim']}D {r['cells']}: {spec} ({why})" for r in records for spec, why in r.get("skipped", {}).items()]
+    skipped = [f"{r['dimensions']}D {r['cells']}: {spec} ({why})" for r in records for spec, why in r.get("skipped", {}).items()]
     if skipped:
         lines += ["", "Not run (too slow, see `--slow-limit`): " + "; ".join(skipped) + "."]
-    lines += ["", "QP references: " + "; ".join(f"{r['dim']}D {r['cells']}: {r['reference_method']} "
+    lines += ["", "QP references: " + "; ".join(f"{r['dimensions']}D {r['cells']}: {r['reference_method']} "
                                              f"({r['reference_seconds']:.3g} s)" for r in records) + "."]
     lines += ["", "Fitted scaling exponent of detect + assemble (slope of log time against log cells):", ""]
-    for dim in sorted({r["dim"] for r in records}):
-        rs = [r for r in records if r["dim"] == dim]
+    for dimensions in sorted({r["dimensions"] for r in records}):
+        rs = [r for r in records if r["dimensions"] == dimensions]
         exp = scaling_exponent([r["cells"] for r in rs], [r["detect"]["median"] + r["assemble"]["median"] for r in rs])
-        lines.append(f"- {dim}D, {rs[0]['cells']}–{rs[-1]['cells']} cells: "
+        lines.append(f"- {dimensions}D, {rs[0]['cells']}–{rs[-1]['cells']} cells: "
                      + ("–" if exp is None else f"**{exp:.2f}**"))
     return "\n".join(lines) + "\n"
 
 
 def plot(records: list[dict[str, Any]], path: Path) -> None:
     """Log–log plot of time against cell count: detect, assemble and each solver, per dimension."""
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    dims = sorted({r["dim"] for r in records})
-    fig, axes = plt.subplots(1, len(dims), figsize=(6 * len(dims), 4.5), squeeze=False)
-    for ax, dim in zip(axes[0], dims):
-        rs = [r for r in records if r["dim"] == dim]
+    all_dimensions = sorted({r["dimensions"] for r in records})
+    fig = Figure(figsize=(6 * len(all_dimensions), 4.5))
+    axes = fig.subplots(1, len(all_dimensions), squeeze=False)
+    for ax, dimensions in zip(axes[0], all_dimensions):
+        rs = [r for r in records if r["dimensions"] == dimensions]
         n = [r["cells"] for r in rs]
         ax.loglog(n, [r["detect"]["median"] for r in rs], "k--o", label="detect")
         ax.loglog(n, [r["assemble"]["median"] for r in rs], "k:s", label="assemble")
@@ -358,13 +353,12 @@ def plot(records: list[dict[str, Any]], path: Path) -> None:
             done = [(r["cells"], r["solvers"][spec]["solve"]["median"]) for r in rs if spec in r["solvers"]]
             ax.loglog(*zip(*done), "-o", label=spec)
         ax.loglog(n, [n_i * 1e-5 for n_i in n], color="0.8", lw=4, zorder=0, label="∝ cells")
-        ax.set(xlabel="cells", ylabel="seconds (median)", title=f"{dim}D colony")
+        ax.set(xlabel="cells", ylabel="seconds (median)", title=f"{dimensions}D colony")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def write_markdown(path: Path, table: str, image: Path) -> None:
@@ -381,14 +375,14 @@ def write_markdown(path: Path, table: str, image: Path) -> None:
     path.write_text(text)
 
 
-def profile_step(dim: int, n: int, seed: int, solver: str, tolerance: float, cache_dir: Path | None, out: Path) -> str:
+def profile_step(dimensions: int, n_cells: int, seed: int, solver: str, tolerance: float, cache_dir: Path | None, out: Path) -> str:
     """cProfile of one step (detect, assemble, solve); writes ``out`` (pstats) and returns the top
     functions by cumulative time as text."""
-    cells = load_scene(dim, n, seed, cache_dir)
+    cells = load_scene(dimensions, n_cells, seed, cache_dir)
     name, form, tol = _parse_solver(solver)
 
     def step() -> None:
-        active, b = _detect(cells, dim == 2)
+        active, b = _detect(cells, dimensions == 2)
         solve_system(build_system(cells, active, b), solver=name, form=form, tolerance=tol or tolerance)
 
     prof = cProfile.Profile()
@@ -410,8 +404,8 @@ def profile_step(dim: int, n: int, seed: int, solver: str, tolerance: float, cac
 EXTRAPOLATION_EXPONENT = {"iterative": 1.5, 2: 2.0, 3: 3.0}
 
 
-def _too_slow(previous: dict[str, Any] | None, n: int, solvers: list[str], limit: float) -> dict[str, str]:
-    """Solvers not to run at ``n`` cells: those skipped before, or whose time at the previous size,
+def _too_slow(previous: dict[str, Any] | None, n_cells: int, solvers: list[str], limit: float) -> dict[str, str]:
+    """Solvers not to run at ``n_cells`` cells: those skipped before, or whose time at the previous size,
     extrapolated with :data:`EXTRAPOLATION_EXPONENT`, exceeds ``limit`` seconds."""
     if previous is None:
         return {}
@@ -423,8 +417,8 @@ def _too_slow(previous: dict[str, Any] | None, n: int, solvers: list[str], limit
         row = previous["solvers"].get(spec)
         if row is None:
             continue
-        kind = "iterative" if _matrix_free(spec) else previous["dim"]
-        guess = row["solve"]["median"] * (n / previous["cells"]) ** EXTRAPOLATION_EXPONENT[kind]
+        kind = "iterative" if _matrix_free(spec) else previous["dimensions"]
+        guess = row["solve"]["median"] * (n_cells / previous["cells"]) ** EXTRAPOLATION_EXPONENT[kind]
         if guess > limit:
             out[spec] = f"{row['solve']['median']:.3g} s at {previous['cells']} cells, extrapolated {guess:.3g} s > {limit:g} s"
     return out
@@ -433,7 +427,7 @@ def _too_slow(previous: dict[str, Any] | None, n: int, solvers: list[str], limit
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="qpcontact bench", description=__doc__.split("\n\n")[0])
     p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="cell counts")
-    p.add_argument("--dims", type=int, nargs="+", default=[2, 3], choices=[2, 3])
+    p.add_argument("--dimensions", type=int, nargs="+", default=[2, 3], choices=[2, 3], help="2D monolayers, 3D biofilms or both")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats of each phase (median, min, max)")
     p.add_argument("--solvers", nargs="+", default=list(DEFAULT_SOLVERS),
                    help=f"solvers ({', '.join(available_solvers(include_baselines=True))}) with an optional /FORM "
@@ -453,7 +447,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--profile", action="store_true",
                    help="also write a cProfile of one step of the largest 2D snapshot (data/performance-profile.*)")
     p.add_argument("--profile-solver", default="osqp/contact")
-    p.add_argument("--worker", nargs=2, type=int, metavar=("DIM", "N"), help=argparse.SUPPRESS)
+    p.add_argument("--worker", nargs=2, type=int, metavar=("DIMENSIONS", "N_CELLS"), help=argparse.SUPPRESS)
     return p
 
 
@@ -463,31 +457,31 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         args.sizes, args.repeats = [300, 1000], 2
     if args.worker:  # one snapshot in this process; JSON on stdout
-        dim, n = args.worker
-        record = run_snapshot(dim, n, seed=args.seed, repeats=args.repeats, solvers=args.solvers,
+        dimensions, n = args.worker
+        record = run_snapshot(dimensions, n, seed=args.seed, repeats=args.repeats, solvers=args.solvers,
                               tolerance=args.tolerance, time_limit=args.time_limit, cache_dir=cache)
         print(json.dumps(record))
         return 0
     records = []
     common = ["--repeats", str(args.repeats), "--seed", str(args.seed), "--tolerance", repr(args.tolerance),
               "--time-limit", repr(args.time_limit), "--cache-dir", str(args.cache_dir)]
-    for dim in args.dims:
+    for dimensions in args.dimensions:
         previous: dict[str, Any] | None = None
         for n in sorted(args.sizes):
-            print(f"bench: {dim}D, {n} cells ...", file=sys.stderr, flush=True)
+            print(f"bench: {dimensions}D, {n} cells ...", file=sys.stderr, flush=True)
             t0 = time.perf_counter()
             skipped = _too_slow(previous, n, args.solvers, args.slow_limit)
             run = [spec for spec in args.solvers if spec not in skipped]
-            proc = subprocess.run([sys.executable, "-m", "qpcontact.studies.bench", "--worker", str(dim), str(n), *common,
+            proc = subprocess.run([sys.executable, "-m", "qpcontact.studies.bench", "--worker", str(dimensions), str(n), *common,
                                    "--solvers", *run], capture_output=True, text=True)
             if proc.returncode != 0:
                 print(proc.stderr, file=sys.stderr)
-                print(f"bench: worker for {dim}D, {n} cells failed (exit {proc.returncode})", file=sys.stderr)
+                print(f"bench: worker for {dimensions}D, {n} cells failed (exit {proc.returncode})", file=sys.stderr)
                 return 1
             previous = json.loads(proc.stdout.strip().splitlines()[-1])
             previous["skipped"] = skipped
             records.append(previous)
-            print(f"bench: {dim}D, {n} cells done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
+            print(f"bench: {dimensions}D, {n} cells done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     meta = {
         "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": machine_description(),
@@ -502,8 +496,8 @@ def main(argv: list[str] | None = None) -> int:
     (out / "data").mkdir(parents=True, exist_ok=True)
     (out / "data" / "performance.json").write_text(json.dumps({"meta": meta, "records": records}, indent=1))
     if args.profile:
-        dim = 2 if 2 in args.dims else args.dims[0]
-        text = profile_step(dim, max(args.sizes), args.seed, args.profile_solver, args.tolerance, cache,
+        dimensions = 2 if 2 in args.dimensions else args.dimensions[0]
+        text = profile_step(dimensions, max(args.sizes), args.seed, args.profile_solver, args.tolerance, cache,
                             out / "data" / "performance-profile.prof")
         (out / "data" / "performance-profile.txt").write_text(text)
     print(table)

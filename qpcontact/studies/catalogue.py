@@ -1,17 +1,19 @@
 """A catalogue of stiff and extreme scenes: named, seeded generators for the stability report.
 
-Each entry of :data:`CATALOGUE` is a :class:`Case`: ``case.make(seed) -> Cells`` builds the scene
-(deterministic for a seed; every generator is vectorized over cells), ``case.contacts(cells)``
-gives the contacts to hand to :func:`qpcontact.resolve` (``None``: let resolve find them) and
-``case.options`` the other resolve keywords the case needs (e.g. position correction for the
-overlap cases, where the overlap depth is what drives ``b``).
+Each entry of :data:`CATALOGUE` is a :class:`~qpcontact.studies.scenes.Scene`, registered in the
+one scene registry (:data:`qpcontact.studies.scenes.SCENES`): ``case.make(seed=...) -> Cells``
+builds the scene (deterministic for a seed; every generator is vectorized over cells),
+``case.contacts(cells)`` gives the contacts to hand to :func:`qpcontact.resolve` (``None``: let
+resolve find them) and ``case.options`` the other resolve keywords the case needs (e.g. position
+correction for the overlap cases, where the overlap depth is what drives ``b``).
 
 Families (``case.family``): mass ratio, aspect ratio, growth inertia, parallel/crossing/
 coincident geometry, overlap depth, relative velocity, units, one cell touched by many, long
 chains, jammed packings (more contacts than degrees of freedom), duplicate contacts.
 
-Sizes: generators take a size keyword (``n``) so tests can build the 10⁴-rod chain or the
-1000-neighbour hub at a reduced size; the catalogue entries are full size.
+Sizes: generators take a size keyword (``n_cells``, ``n_neighbours``, ``n_pairs``) so tests
+can build the 10⁴-rod chain or the 1000-neighbour hub at a reduced size; the catalogue entries
+are full size.
 
 Every scene is built so that its contacts collide (overlap and approach), otherwise there would
 be nothing to solve.
@@ -19,14 +21,12 @@ be nothing to solve.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from functools import partial
-from typing import Any, Callable
 
 import numpy as np
 
-from ..geometry.cells import Cells
-from ..geometry.contacts import Contacts, concatenate, find_contacts
+from ..geometry import Cells, Contacts, capsule_volume, concatenate, find_contacts
+from .scenes import Scene, register_scene
 
 #: Default radius and length of a rod [length units of the scene].
 RADIUS, LENGTH = 0.5, 2.0
@@ -39,29 +39,6 @@ JITTER = 3e-4
 #: always in the range of M (stopping every cell satisfies every contact), so even a jammed
 #: packing has a consistent Mx = b; the overlap term is what makes it over-determined.
 JAMMED_OPTIONS = {"position_correction": 0.5, "dt": 1e-3}
-
-
-@dataclass(frozen=True)
-class Case:
-    """One catalogue entry.
-
-    Attributes:
-        name: unique name (``family_parameter``).
-        family: the family it belongs to (for tests and the report).
-        description: one line: what the scene is and what makes it hard.
-        make: ``make(seed, **size) -> Cells``.
-        contacts: ``contacts(cells) -> Contacts`` to pass to resolve, or None (resolve finds them).
-        options: further keywords for :func:`qpcontact.resolve` (e.g. position correction).
-        large: True for the full-size scenes (10⁴ chain, 1000-neighbour hub) that tests shrink.
-    """
-
-    name: str
-    family: str
-    description: str
-    make: Callable[..., Cells]
-    contacts: Callable[[Cells], Contacts] | None = None
-    options: dict[str, Any] = field(default_factory=dict)
-    large: bool = False
 
 
 # ------------------------------------------------------------------------------------------
@@ -77,8 +54,7 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _cells(centers, axes, lengths, radii, masses, velocities, *, growth_inertia=np.inf, growth_rates=0.0,
-           angular_velocities=None) -> Cells:
+def _cells(centers, axes, lengths, radii, masses, velocities, *, growth_inertia=np.inf, growth_rates=0.0) -> Cells:
     """Cells moving with the given velocities (momenta = m·v; fixed cells get zero momentum)."""
     centers = np.asarray(centers, dtype=float)
     n = centers.shape[0]
@@ -87,16 +63,7 @@ def _cells(centers, axes, lengths, radii, masses, velocities, *, growth_inertia=
     momenta = np.where(finite[:, None], np.broadcast_to(velocities, (n, 3)) * np.where(finite, masses, 0.0)[:, None], 0.0)
     g_inertia = np.broadcast_to(np.asarray(growth_inertia, dtype=float), (n,))
     growth = np.where(np.isfinite(g_inertia), np.where(np.isfinite(g_inertia), g_inertia, 0.0) * growth_rates, 0.0)
-    cells = Cells(centers, axes, lengths, radii, masses, g_inertia, momenta, 0.0, growth)
-    if angular_velocities is not None:
-        # L = I ω with I = (I∥ ââᵀ + I⊥(Id − ââᵀ)); fixed cells keep zero angular momentum.
-        w = np.broadcast_to(np.asarray(angular_velocities, dtype=float), (n, 3))
-        along = np.einsum("ij,ij->i", cells.axes, w)[:, None] * cells.axes
-        i_par = 1.0 / cells.inverse_inertia_parallel
-        i_perp = 1.0 / cells.inverse_inertia_perpendicular
-        ang = np.where(finite[:, None], i_par[:, None] * along + i_perp[:, None] * (w - along), 0.0)
-        cells = cells.replace(angular_momenta=ang)
-    return cells
+    return Cells(centers, axes, lengths, radii, masses, g_inertia, momenta, 0.0, growth)
 
 
 def _compressed(centers: np.ndarray, speed: float, rng: np.random.Generator, noise: float = 0.1) -> np.ndarray:
@@ -123,11 +90,12 @@ def mass_sandwich(seed: int, *, ratio: float) -> Cells:
     return _cells(centers, axes, LENGTH, RADIUS, np.array([1.0, ratio, 1.0]), velocities)
 
 
-def crossing_star(seed: int, *, aspect: float, n: int = 6) -> Cells:
-    """A rod of aspect ratio ``l/ρ = aspect`` along x touched by ``n`` rods of the same shape
+def crossing_star(seed: int, *, aspect: float, n_neighbours: int = 6) -> Cells:
+    """A rod of aspect ratio ``l/ρ = aspect`` along x touched by ``n_neighbours`` rods of the same shape
     crossing it from above and below at seeded positions along its length (all moving towards
     it). For ``aspect = 0`` (spheres), the neighbours sit around the centre sphere instead."""
     rng = np.random.default_rng(seed)
+    n = n_neighbours
     length = aspect * RADIUS
     gap = 2 * RADIUS * (1 - OVERLAP)
     side = np.where(np.arange(n) % 2 == 0, 1.0, -1.0)
@@ -147,10 +115,11 @@ def crossing_star(seed: int, *, aspect: float, n: int = 6) -> Cells:
     return _cells(centers, axes, length, RADIUS, 1.0, velocities)
 
 
-def growing_chain(seed: int, *, growth_inertia: float, n: int = 5) -> Cells:
-    """``n`` rods end to end along x (small seeded tilts) that push on each other by growing
+def growing_chain(seed: int, *, growth_inertia: float, n_cells: int = 5) -> Cells:
+    """``n_cells`` rods end to end along x (small seeded tilts) that push on each other by growing
     (length rate 1; for infinite G the cells do not grow and are compressed instead)."""
     rng = np.random.default_rng(seed)
+    n = n_cells
     pitch = LENGTH + 2 * RADIUS * (1 - OVERLAP)
     centers = np.column_stack([pitch * np.arange(n), 1e-3 * rng.standard_normal((n, 2))])
     axes = _unit(np.column_stack([np.ones(n), 1e-3 * rng.standard_normal((n, 2))]))
@@ -213,10 +182,11 @@ def overlap_pair(seed: int, *, overlap: float) -> Cells:
     return _cells(centers, axes, LENGTH, RADIUS, 1.0, np.zeros((2, 3)))
 
 
-def mixed_overlaps(seed: int, *, n: int = 15) -> Cells:
-    """A row of ``n`` sphere pairs at rest whose overlaps range log-uniformly from 1e-14 to 1 of
+def mixed_overlaps(seed: int, *, n_pairs: int = 15) -> Cells:
+    """A row of ``n_pairs`` sphere pairs at rest whose overlaps range log-uniformly from 1e-14 to 1 of
     the diameter in one scene (``b`` spans 14 decades)."""
     rng = np.random.default_rng(seed)
+    n = n_pairs
     overlaps = np.logspace(-14, 0, n)
     rng.shuffle(overlaps)
     x = 10.0 * np.arange(n)
@@ -233,27 +203,28 @@ def velocity_pair(seed: int, *, speed: float) -> Cells:
     return cells.replace(momenta=np.array([[0.0, 0.0, -0.5 * speed], [0.0, 0.0, 0.5 * speed]]))
 
 
-def mixed_velocities(seed: int, *, n: int = 25) -> Cells:
+def mixed_velocities(seed: int, *, n_cells: int = 25) -> Cells:
     """A seeded cluster of rods whose approach speeds range log-uniformly from 1e-12 to 1e12 in
     one scene."""
     rng = np.random.default_rng(seed)
-    cells = random_cluster(seed, n=n)
-    speeds = 10.0 ** rng.uniform(-12, 12, n)
+    cells = random_cluster(seed, n_cells=n_cells)
+    speeds = 10.0 ** rng.uniform(-12, 12, n_cells)
     v = _unit(cells.centers.mean(axis=0) - cells.centers) * speeds[:, None]
     return cells.replace(momenta=v * cells.masses[:, None])
 
 
-def random_cluster(seed: int, *, n: int = 25, scale_length: float = 1.0, scale_mass: float = 1.0,
+def random_cluster(seed: int, *, n_cells: int = 25, scale_length: float = 1.0, scale_mass: float = 1.0,
                    scale_time: float = 1.0) -> Cells:
-    """A seeded 3D heap of ``n`` rods (lengths 1–3, radius 0.5, density 1) squeezed towards its
+    """A seeded 3D heap of ``n_cells`` rods (lengths 1–3, radius 0.5, density 1) squeezed towards its
     centroid, in units where a length is ``scale_length``, a mass ``scale_mass`` and a time
     ``scale_time`` (so the same scene can be written in m/kg/s and µm/pg/s)."""
     rng = np.random.default_rng(seed)
+    n = n_cells
     side = 1.6 * n ** (1 / 3)
     centers = rng.uniform(0, side, (n, 3))
     axes = _unit(rng.standard_normal((n, 3)))
     lengths = rng.uniform(1.0, 3.0, n)
-    masses = np.pi * RADIUS**2 * (lengths + 4 / 3 * RADIUS)  # density 1
+    masses = capsule_volume(lengths, RADIUS)  # density 1
     velocities = _compressed(centers, 1.0, rng)
     growth = rng.uniform(0.0, 0.5, n)
     cells = _cells(centers, axes, lengths, RADIUS, masses, velocities, growth_inertia=masses, growth_rates=growth)
@@ -263,10 +234,11 @@ def random_cluster(seed: int, *, n: int = 25, scale_length: float = 1.0, scale_m
                  cells.angular_momenta * scale_mass * scale_length * v_unit, cells.growth_momenta * scale_mass * v_unit)
 
 
-def hub(seed: int, *, n: int = 1000) -> Cells:
-    """One big sphere touched by ``n`` rods standing radially on it (tip contacts, a
+def hub(seed: int, *, n_neighbours: int = 1000) -> Cells:
+    """One big sphere touched by ``n_neighbours`` rods standing radially on it (tip contacts, a
     Fibonacci lattice of directions, seeded jitter), all moving inwards; masses by volume."""
     rng = np.random.default_rng(seed)
+    n = n_neighbours
     big = RADIUS * np.sqrt(n / 1.2)  # surface area per neighbour ≈ 4.2 (2ρ)²
     k = np.arange(n) + 0.5
     phi = np.arccos(1 - 2 * k / n)
@@ -278,14 +250,15 @@ def hub(seed: int, *, n: int = 1000) -> Cells:
     axes = np.vstack([[1.0, 0.0, 0.0], axes])
     lengths = np.concatenate([[0.0], np.full(n, LENGTH)])
     radii = np.concatenate([[big], np.full(n, RADIUS)])
-    masses = np.pi * radii**2 * (lengths + 4 / 3 * radii)
+    masses = capsule_volume(lengths, radii)
     velocities = -directions * rng.uniform(0.5, 1.0, (n, 1))
     return _cells(centers, axes, lengths, radii, masses, np.vstack([np.zeros(3), velocities]))
 
 
-def long_chain(seed: int, *, n: int = 10_000) -> Cells:
-    """``n`` growing rods end to end along x (seeded tilts and lateral jitter), G = m."""
+def long_chain(seed: int, *, n_cells: int = 10_000) -> Cells:
+    """``n_cells`` growing rods end to end along x (seeded tilts and lateral jitter), G = m."""
     rng = np.random.default_rng(seed)
+    n = n_cells
     pitch = LENGTH + 2 * RADIUS * (1 - OVERLAP)
     centers = np.column_stack([pitch * np.arange(n), 1e-3 * rng.standard_normal(n), np.zeros(n)])
     axes = _unit(np.column_stack([np.ones(n), 1e-3 * rng.standard_normal(n), np.zeros(n)]))
@@ -363,54 +336,54 @@ def duplicated_contacts(cells: Cells) -> Contacts:
 # ------------------------------------------------------------------------------------------
 # The catalogue
 # ------------------------------------------------------------------------------------------
-def _catalogue() -> dict[str, Case]:
-    cases: list[Case] = []
+def _catalogue() -> list[Scene]:
+    cases: list[Scene] = []
     add = cases.append
     for ratio in (1e-8, 1e-4, 1e4, 1e8):
-        add(Case(f"mass_ratio_{ratio:g}", "mass_ratio",
+        add(Scene(f"mass_ratio_{ratio:g}", "mass_ratio",
                  f"a rod of mass {ratio:g} pressed between two rods of mass 1", partial(mass_sandwich, ratio=ratio)))
-    add(Case("mass_ratio_inf", "mass_ratio", "a rod pressed between two fixed (infinite-mass) rods",
+    add(Scene("mass_ratio_inf", "mass_ratio", "a rod pressed between two fixed (infinite-mass) rods",
              squeezed_between_fixed))
     for aspect in (0.0, 1e-8, 1.0, 1e2, 1e4):
-        add(Case(f"aspect_{aspect:g}", "aspect_ratio",
+        add(Scene(f"aspect_{aspect:g}", "aspect_ratio",
                  f"a rod with l/ρ = {aspect:g} crossed by 6 rods of the same shape" + (" (spheres)" if aspect == 0 else ""),
                  partial(crossing_star, aspect=aspect)))
     for g in (1e-8, 1.0, 1e8, np.inf):
-        add(Case(f"growth_inertia_{g:g}", "growth_inertia",
+        add(Scene(f"growth_inertia_{g:g}", "growth_inertia",
                  f"5 rods end to end pushing by growth, G = {g:g}" + (" (not growing, compressed)" if np.isinf(g) else ""),
                  partial(growing_chain, growth_inertia=g)))
     for angle in (1e-3, 1e-6, 1e-12, 0.0):
-        add(Case(f"parallel_{angle:g}", "geometry", f"two side-by-side rods at {angle:g} rad (planar)",
+        add(Scene(f"parallel_{angle:g}", "geometry", f"two side-by-side rods at {angle:g} rad (planar)",
                  partial(angled_pair, angle=angle)))
-    add(Case("parallel_1e-12_3d", "geometry", "two side-by-side rods at 1e-12 rad, out of the plane",
+    add(Scene("parallel_1e-12_3d", "geometry", "two side-by-side rods at 1e-12 rad, out of the plane",
              partial(angled_pair, angle=1e-12, planar=False)))
-    add(Case("crossing", "geometry", "two rods whose axes intersect (δ = 0)", crossing_axes))
-    add(Case("coincident", "geometry", "two identical rods with the same centre and axis", coincident))
+    add(Scene("crossing", "geometry", "two rods whose axes intersect (δ = 0)", crossing_axes))
+    add(Scene("coincident", "geometry", "two identical rods with the same centre and axis", coincident))
     for overlap in (1e-14, 1e-8, 1e-3, 0.5, 1.0):
-        add(Case(f"overlap_{overlap:g}", "overlap", f"two crossing rods at rest overlapping by {overlap:g} diameter",
+        add(Scene(f"overlap_{overlap:g}", "overlap", f"two crossing rods at rest overlapping by {overlap:g} diameter",
                  partial(overlap_pair, overlap=overlap), options={"position_correction": 1.0, "dt": 1.0}))
-    add(Case("overlap_mixed", "overlap", "15 sphere pairs at rest, overlaps 1e-14..1 diameter in one scene",
+    add(Scene("overlap_mixed", "overlap", "15 sphere pairs at rest, overlaps 1e-14..1 diameter in one scene",
              mixed_overlaps, options={"position_correction": 1.0, "dt": 1.0}))
     for speed in (1e-12, 1e-6, 1e6, 1e12):
-        add(Case(f"velocity_{speed:g}", "velocity", f"two crossing rods approaching at {speed:g}",
+        add(Scene(f"velocity_{speed:g}", "velocity", f"two crossing rods approaching at {speed:g}",
                  partial(velocity_pair, speed=speed)))
-    add(Case("velocity_mixed", "velocity", "25 rods, approach speeds 1e-12..1e12 in one scene", mixed_velocities))
-    add(Case("units_m_kg_s", "units", "25 rods (ρ = 0.5 µm, density 1 pg/µm³) in m, kg, s",
+    add(Scene("velocity_mixed", "velocity", "25 rods, approach speeds 1e-12..1e12 in one scene", mixed_velocities))
+    add(Scene("units_m_kg_s", "units", "25 rods (ρ = 0.5 µm, density 1 pg/µm³) in m, kg, s",
              partial(random_cluster, scale_length=1e-6, scale_mass=1e-15)))
-    add(Case("units_um_pg_s", "units", "the same 25 rods in µm, pg, s", random_cluster))
-    add(Case("hub_1000", "hub", "a big sphere touched by 1000 radial rods", hub, large=True))
-    add(Case("chain_10000", "chain", "10⁴ growing rods end to end", long_chain, large=True))
-    add(Case("jammed_disks", "jammed", "144 disks in a hexagonal packing (planar): 381 contacts, 288 unknowns",
+    add(Scene("units_um_pg_s", "units", "the same 25 rods in µm, pg, s", random_cluster))
+    add(Scene("hub_1000", "hub", "a big sphere touched by 1000 radial rods", hub, large=True))
+    add(Scene("chain_10000", "chain", "10⁴ growing rods end to end", long_chain, large=True))
+    add(Scene("jammed_disks", "jammed", "144 disks in a hexagonal packing (planar): 381 contacts, 288 unknowns",
              hexagonal_disks, options=JAMMED_OPTIONS))
-    add(Case("jammed_fcc", "jammed", "63 spheres in an fcc packing: 240 contacts, 189 unknowns", fcc_spheres, options=JAMMED_OPTIONS))
-    add(Case("jammed_rod_bundle", "jammed", "36 parallel rods in a hexagonal bundle: 170 contacts, 180 unknowns, rank-deficient",
+    add(Scene("jammed_fcc", "jammed", "63 spheres in an fcc packing: 240 contacts, 189 unknowns", fcc_spheres, options=JAMMED_OPTIONS))
+    add(Scene("jammed_rod_bundle", "jammed", "36 parallel rods in a hexagonal bundle: 170 contacts, 180 unknowns, rank-deficient",
              rod_bundle, options=JAMMED_OPTIONS))
-    add(Case("duplicate_contacts", "duplicate", "a 25-rod heap with every contact listed twice",
+    add(Scene("duplicate_contacts", "duplicate", "a 25-rod heap with every contact listed twice",
              random_cluster, contacts=duplicated_contacts))
-    add(Case("near_duplicate", "duplicate", "two parallel rods whose two end contacts are 1e-8 length apart",
+    add(Scene("near_duplicate", "duplicate", "two parallel rods whose two end contacts are 1e-8 length apart",
              near_duplicate))
-    return {case.name: case for case in cases}
+    return cases
 
 
-#: name -> Case, in report order.
-CATALOGUE: dict[str, Case] = _catalogue()
+#: name -> Scene, in report order (each also registered in :data:`qpcontact.studies.scenes.SCENES`).
+CATALOGUE: dict[str, Scene] = {case.name: register_scene(case) for case in _catalogue()}

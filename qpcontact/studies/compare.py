@@ -1,6 +1,6 @@
 """``qpcontact compare``: every solver's error against its run time, on colony scenes.
 
-For each scene (:mod:`qpcontact.scenes`), the system is assembled once (:func:`build_system`);
+For each scene (:mod:`qpcontact.studies.scenes`), the system is assembled once (:func:`build_system`);
 then each *method* — a solver with a formulation and a form — solves it at each tolerance, and
 the run is timed (median of repeats, setup and solve apart) and measured against a high-accuracy
 reference of the same formulation (model.md, "Measuring error"). Methods:
@@ -22,9 +22,9 @@ acceptance checks.
 Every run becomes a row of the CSV, failures and time-outs included. A run *succeeds* when the
 solver says it converged (and passes the package's own acceptance checks) and its answer is
 within ``ACCURACY_FACTOR·tolerance`` of the reference; a run that says it converged but is not
-that close is counted as *reported success, inaccurate*. Each run is made in a forked child
-process with a hard time-out, so a backend without a time limit of its own (or one that crashes)
-cannot stop the comparison.
+that close is counted as *reported success, inaccurate*. Each run is made in a child process
+with a hard time-out (:func:`qpcontact.studies.harness.guarded`), so a backend without a time
+limit of its own (or one that crashes) cannot stop the comparison.
 
 Outputs in ``--out``: ``solvers.csv`` (every run), ``solvers.png`` (error against time, log–log,
 one panel per scene family and formulation), ``solvers_scenes.png`` (top views of the scenes),
@@ -39,20 +39,20 @@ import math
 import multiprocessing
 import platform
 import time
-import traceback
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import qpsolvers
 
 from ..assembly import ContactSystem, build_system
-from ..geometry import Cells, colliding, find_contacts
-from ..resolve import ACTIVE_THRESHOLD, metrics, reference_solution, solve_system
-from ..solvers import QP_FORMS, available_solvers, get_solver, solve_min_norm
-from ..solvers.baselines import bbpgd
+from ..geometry import colliding, find_contacts
+from ..resolve import metrics, solve_system
+from ..solvers import QP_FORMS, available_solvers, get_solver
+from . import harness
+from .harness import Prepared
 from .scenes import make_scene
 
 #: A run is accurate when its distance to the reference is at most this many times the tolerance
@@ -74,7 +74,7 @@ class SceneCase:
     Attributes:
         name: label (also the ``--scenes`` name).
         family: panel of the plot (``hand-made``, ``colony_2d``, ``colony_3d``).
-        generator: key of :data:`qpcontact.scenes.SCENES`.
+        generator: key of :data:`qpcontact.studies.scenes.SCENES`.
         n_cells: cell count handed to the generator (None: its default).
         position_correction, dt: ``b = −u + β·max(0, −d)/dt`` (β = 0: plain approach speeds,
             for which ``Mx = b`` is always consistent, since stopping every cell solves it).
@@ -141,107 +141,50 @@ def all_methods(solvers: list[str] | None = None) -> list[Method]:
 # ------------------------------------------------------------------------------------------
 # Scenes and references
 # ------------------------------------------------------------------------------------------
-@dataclass
-class Prepared:
-    """An assembled scene with its references."""
-
-    case: SceneCase
-    cells: Cells
-    system: ContactSystem
-    references: dict[str, np.ndarray]  # formulation -> ỹ* ("linear", "least_squares", "complementarity")
-    reference_residual: float  # KKT residual of the complementarity reference
-    all_active: bool  # the linear solve pushes at every contact (then every formulation equals it)
-    assemble_seconds: float
-    reference_seconds: float
-
-
-def complementarity_reference(system: ContactSystem) -> tuple[np.ndarray, float]:
-    """``(ỹ*, residual)``: :func:`reference_solution`, then refined by BBPGD to a
-    complementarity residual of 1e-12, started from its own contact impulses; the refinement is
-    kept only if it certifies a smaller residual ``‖min(λ̃, B̃ỹ − b̃)‖∞`` (with ``ỹ = B̃ᵀλ̃``, λ̃ ≥ 0)."""
-    y = reference_solution(system, "complementarity")
-    lam = solve_min_norm(system.matrix.T.tocsr(), y, tolerance=1e-12, method="lsmr").y
-    residual = max(metrics.complementarity_residual(system, y, lam), float(np.max(-lam, initial=0.0)))
-    refined = solve_baseline_from(system, np.maximum(lam, 0.0))
-    if refined is not None and refined[1] < residual:
-        return refined
-    return y, residual
-
-
-def solve_baseline_from(system: ContactSystem, initial: np.ndarray) -> tuple[np.ndarray, float] | None:
-    out = bbpgd(system.matrix, system.rhs, tolerance=1e-12, initial=initial, max_iterations=50_000, time_limit=60.0)
-    return (out.y, out.residual) if out.converged else None
-
-
 def prepare(case: SceneCase) -> Prepared:
-    """Generate, assemble and solve the references of one scene."""
-    cells = make_scene(case.generator, case.n_cells)
-    t0 = time.perf_counter()
-    active, b = colliding(find_contacts(cells), position_correction=case.position_correction, dt=case.dt)
-    system = build_system(cells, active, b)
-    t1 = time.perf_counter()
-    lin = solve_min_norm(system.matrix, system.rhs, tolerance=1e-10)  # as reference_solution does
-    comp, residual = complementarity_reference(system)
-    references = {"linear": lin.y, "least_squares": reference_solution(system, "least_squares"), "complementarity": comp}
-    lam_scale = max(float(np.max(np.abs(lin.lam), initial=0.0)), 1e-300)
-    all_active = bool(lin.consistent and np.all(lin.lam > ACTIVE_THRESHOLD * lam_scale))
-    return Prepared(case, cells, system, references, residual, all_active, t1 - t0, time.perf_counter() - t1)
+    """Generate, assemble and solve the references of one scene (the complementarity reference
+    refined by BBPGD, :func:`~qpcontact.studies.harness.complementarity_reference`)."""
+    kwargs = {} if case.n_cells is None else {"n_cells": case.n_cells}
+    cells = make_scene(case.generator, **kwargs)
+    return harness.prepare(case, cells, position_correction=case.position_correction, dt=case.dt, refine=True)
 
 
 # ------------------------------------------------------------------------------------------
 # One run
 # ------------------------------------------------------------------------------------------
-def solve_once(prepared: Prepared, method: Method, tolerance: float, time_limit: float) -> dict[str, Any]:
+def solve_once(system: ContactSystem, method: Method, tolerance: float, time_limit: float) -> dict[str, Any]:
     """Solve once through :func:`~qpcontact.resolve.solve_system`; returns y, lam, converged,
     status, iterations, setup, solve, message."""
-    y, lam, info = solve_system(prepared.system, solver=method.solver, formulation=method.formulation,
-                                form=method.form, tolerance=tolerance, time_limit=time_limit)
+    y, lam, info = solve_system(system, solver=method.solver, formulation=method.formulation, form=method.form,
+                                tolerance=tolerance, time_limit=time_limit)
     return {"y": y, "lam": lam, "converged": bool(info["converged"]), "status": info["status"],
             "iterations": info["iterations"], "setup": info["setup"], "solve": info["solve"], "message": info["message"]}
 
 
-def repeated(prepared: Prepared, method: Method, tolerance: float, time_limit: float, repeats: int) -> dict[str, Any]:
+def repeated(system: ContactSystem, method: Method, tolerance: float, time_limit: float, repeats: int) -> dict[str, Any]:
     """Up to ``repeats`` solves (fewer once they took ``REPEAT_BUDGET``); medians of the times."""
-    setups, solves, out = [], [], {}
+    setups: list[float] = []
+    solves: list[float] = []
+    out: dict[str, Any] = {}
     while len(solves) < repeats and (not solves or sum(setups) + sum(solves) < REPEAT_BUDGET):
-        out = solve_once(prepared, method, tolerance, time_limit)
+        out = solve_once(system, method, tolerance, time_limit)
         setups.append(out["setup"])
         solves.append(out["solve"])
     out.update(setup=float(np.median(setups)), solve=float(np.median(solves)), repeats=len(solves))
     return out
 
 
-def _child(conn, fn: Callable[[], dict[str, Any]]) -> None:
-    try:
-        conn.send(("ok", fn()))
-    except BaseException as exc:  # report everything to the parent, which records it as a row
-        conn.send(("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"))
-    finally:
-        conn.close()
-
-
-def guarded(fn: Callable[[], dict[str, Any]], timeout: float) -> tuple[str, Any]:
-    """Run ``fn`` in a forked child with a hard ``timeout`` [s]: ``("ok", result)``,
-    ``("error", text)``, ``("timeout", None)`` or ``("crashed", exit code)``."""
-    context = multiprocessing.get_context("fork")
-    parent, child = context.Pipe(duplex=False)
-    process = context.Process(target=_child, args=(child, fn), daemon=True)
-    process.start()
-    child.close()
-    try:
-        if parent.poll(timeout):
-            try:
-                return parent.recv()
-            except EOFError:
-                pass
-            process.join(5)
-            return "crashed", process.exitcode
-        return "timeout", None
-    finally:
-        if process.is_alive():
-            process.kill()
-        process.join()
-        parent.close()
+def timed_runs(system: ContactSystem, method: Method, tolerance: float, time_limit: float, repeats: int,
+               warm: ContactSystem | None = None) -> dict[str, Any]:
+    """What a child process of :func:`run_one` does: solve the small ``warm`` system once with
+    the method (untimed: first-call initialization stays out of the times; a failure there
+    shows again in the timed runs), then :func:`repeated`."""
+    if warm is not None:
+        try:
+            solve_once(warm, method, 1e-6, 5.0)
+        except Exception:  # noqa: BLE001 - recorded by the timed runs
+            pass
+    return repeated(system, method, tolerance, time_limit, repeats)
 
 
 def measure(prepared: Prepared, method: Method, tolerance: float, y: np.ndarray | None, lam: np.ndarray | None) -> dict[str, float]:
@@ -252,6 +195,7 @@ def measure(prepared: Prepared, method: Method, tolerance: float, y: np.ndarray 
     if y is None or not np.all(np.isfinite(y)):
         return dict.fromkeys(keys, nan)
     system = prepared.system
+    assert system is not None, "every scene of the comparison has colliding contacts"
     reference = prepared.references[method.formulation]
     impulses = system.to_impulses(y)
     physics = metrics.physics(prepared.cells, system, impulses, None if lam is None else system.to_contact_impulses(lam))
@@ -278,9 +222,12 @@ COLUMNS = (
 )
 
 
-def run_one(prepared: Prepared, method: Method, tolerance: float, *, time_limit: float, repeats: int) -> dict[str, Any]:
-    """One row of the CSV (never raises for a solver failure)."""
+def run_one(prepared: Prepared, method: Method, tolerance: float, *, time_limit: float, repeats: int,
+            warm: ContactSystem | None = None) -> dict[str, Any]:
+    """One row of the CSV (never raises for a solver failure). The solves run in a child
+    process (:func:`~qpcontact.studies.harness.guarded`), warmed up on ``warm`` first."""
     system = prepared.system
+    assert system is not None, "every scene of the comparison has colliding contacts"
     k, n = system.shape
     row: dict[str, Any] = {
         "scene": prepared.case.name, "family": prepared.case.family, "n_cells": prepared.cells.n, "contacts": k,
@@ -290,7 +237,8 @@ def run_one(prepared: Prepared, method: Method, tolerance: float, *, time_limit:
     # Repeats stop once they took REPEAT_BUDGET, so a child needs at most that plus one solve.
     hard_timeout = 1.5 * time_limit + REPEAT_BUDGET + 5.0
     start = time.perf_counter()
-    outcome, payload = guarded(lambda: repeated(prepared, method, tolerance, time_limit, repeats), hard_timeout)
+    outcome, payload = harness.guarded(timed_runs, (system, method, tolerance, time_limit, repeats, warm), hard_timeout,
+                                       preload=("qpcontact.studies.compare",))
     y = lam = None
     if outcome == "ok":
         y, lam = payload["y"], payload["lam"]
@@ -435,15 +383,13 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
     (columns) and formulation (rows; the plain linear problem goes with least_squares), one
     marker per solver, one line per tolerance sweep (a method on one scene), solid for the primal
     form, dashed for the contact form. Failed runs are not drawn (they are in the CSV)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
 
     families = list(dict.fromkeys(r["family"] for r in rows))
     panel_rows = [("complementarity", ("complementarity",)), ("least_squares and linear", ("least_squares", "linear"))]
-    fig, axes = plt.subplots(len(panel_rows), len(families), figsize=(5.2 * len(families), 4.4 * len(panel_rows)),
-                             squeeze=False, sharex=True, sharey=True)
+    fig = Figure(figsize=(5.2 * len(families), 4.4 * len(panel_rows)))
+    axes = fig.subplots(len(panel_rows), len(families), squeeze=False, sharex=True, sharey=True)
     floor, ceiling = 1e-13, 10.0  # errors beyond are drawn at the edge (the CSV has the values)
     handles = {}
     for i, (title, formulations) in enumerate(panel_rows):
@@ -463,7 +409,7 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
                 ax.plot(t, d, color=color, lw=0.8, alpha=0.6, ls="--" if form == "contact" else "-")
                 ax.scatter(t[ok], d[ok], color=color, marker=marker, s=22, zorder=3)
                 ax.scatter(t[~ok], d[~ok], facecolors="none", edgecolors=color, marker="o", s=40, zorder=3)
-                handles[solver] = plt.Line2D([], [], color=color, marker=marker, ls="")
+                handles[solver] = Line2D([], [], color=color, marker=marker, ls="")
             ax.set_xscale("log")
             ax.set_yscale("log")
             ax.set_ylim(floor / 3, ceiling * 3)
@@ -473,28 +419,26 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
                 ax.set_xlabel("time (setup + solve) [s]")
             if j == 0:
                 ax.set_ylabel("‖x − x*‖_W / ‖x*‖_W")
-    handles["failed check (hollow)"] = plt.Line2D([], [], color="k", marker="o", markerfacecolor="none", ls="")
-    handles["contact form (dashed)"] = plt.Line2D([], [], color="k", ls="--")
+    handles["failed check (hollow)"] = Line2D([], [], color="k", marker="o", markerfacecolor="none", ls="")
+    handles["contact form (dashed)"] = Line2D([], [], color="k", ls="--")
     fig.legend(handles.values(), handles.keys(), loc="lower center", ncol=min(7, len(handles)), fontsize=9)
     fig.tight_layout(rect=(0, 0.07, 1, 1))
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def plot_scenes(cases: list[SceneCase], path: Path, max_cells: int = 1000) -> None:
     """Top views of the scenes (colonies up to ``max_cells`` cells): each rod drawn as a segment
     as thick as its diameter with round caps, coloured by orientation (planar scenes) or by
     height (3D scenes; higher cells drawn on top)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib import colormaps
     from matplotlib.collections import LineCollection
+    from matplotlib.figure import Figure
 
     shown = [c for c in cases if (c.n_cells or 0) <= max_cells and c.position_correction == 0]
     columns = min(4, len(shown))
     n_rows = -(-len(shown) // columns)
-    fig, axes = plt.subplots(n_rows, columns, figsize=(3.6 * columns, 3.6 * n_rows), squeeze=False)
+    fig = Figure(figsize=(3.6 * columns, 3.6 * n_rows))
+    axes = fig.subplots(n_rows, columns, squeeze=False)
     for ax in axes.flat[len(shown):]:
         ax.set_visible(False)
     for ax, case in zip(axes.flat, shown):
@@ -503,9 +447,9 @@ def plot_scenes(cases: list[SceneCase], path: Path, max_cells: int = 1000) -> No
         ends = np.stack([cells.centers - half, cells.centers + half], axis=1)[:, :, :2]
         z = cells.centers[:, 2]
         if np.ptp(z) > 0:
-            colour = plt.cm.viridis((z - z.min()) / np.ptp(z))
+            colour = colormaps["viridis"]((z - z.min()) / np.ptp(z))
         else:
-            colour = plt.cm.hsv((np.arctan2(cells.axes[:, 1], cells.axes[:, 0]) % np.pi) / np.pi)
+            colour = colormaps["hsv"]((np.arctan2(cells.axes[:, 1], cells.axes[:, 0]) % np.pi) / np.pi)
         rho = float(cells.radii.max())
         lo, hi = ends.reshape(-1, 2).min(axis=0) - 2 * rho, ends.reshape(-1, 2).max(axis=0) + 2 * rho
         centre, span = 0.5 * (lo + hi), float((hi - lo).max())
@@ -524,7 +468,6 @@ def plot_scenes(cases: list[SceneCase], path: Path, max_cells: int = 1000) -> No
         ax.set_title(f"{case.name} ({cells.n} cells)", fontsize=9)
         ax.tick_params(labelsize=7)
     fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 # ------------------------------------------------------------------------------------------
@@ -544,15 +487,11 @@ def _select_scenes(spec: str | None, quick: bool) -> list[SceneCase]:
     return out
 
 
-def warm_up(methods: list[Method]) -> None:
-    """Solve a two-rod scene once with every method in this process, so that lazy imports and
-    first-call initialization are done before the timed runs are forked off."""
-    prepared = prepare(SceneCase("warm-up", "hand-made", "two_rods"))
-    for method in methods:
-        try:
-            solve_once(prepared, method, 1e-6, 5.0)
-        except Exception:  # a backend that fails here fails again, and is recorded, in the real runs
-            pass
+def warm_up_system() -> ContactSystem:
+    """The small system each timed child solves once before its runs (a two-rod scene)."""
+    cells = make_scene("two_rods")
+    active, b = colliding(find_contacts(cells))
+    return build_system(cells, active, b)
 
 
 def read_csv(path: Path) -> list[dict[str, Any]]:
@@ -572,11 +511,7 @@ def read_csv(path: Path) -> list[dict[str, Any]]:
 
 
 def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    with path.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=COLUMNS)
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in row.items()})
+    harness.write_csv(rows, path, COLUMNS, digits=6)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -611,7 +546,7 @@ def main(argv: list[str] | None = None) -> int:
     started = datetime.now(timezone.utc)
     rows: list[dict[str, Any]] = []
     scene_lines = []
-    warm_up(methods)
+    warm = warm_up_system()
     with tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True) as bar:
         for case in cases:
             bar.set_description(f"{case.name}: references")
@@ -627,7 +562,8 @@ def main(argv: list[str] | None = None) -> int:
                     if dense_only and n > DENSE_MAX_UNKNOWNS:
                         bar.update()
                         continue  # dense-only backends are not run on large scenes (stated in the report)
-                    rows.append(run_one(prepared, method, tolerance, time_limit=args.time_limit, repeats=repeats))
+                    rows.append(run_one(prepared, method, tolerance, time_limit=args.time_limit, repeats=repeats,
+                                        warm=warm))
                     bar.update()
     finished = datetime.now(timezone.utc)
     write_csv(rows, args.out / "solvers.csv")

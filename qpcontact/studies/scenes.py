@@ -1,7 +1,13 @@
-"""Reproducible test scenes: colony snapshots and small hand-made cases.
+"""Reproducible scenes, and the one scene registry of the studies.
 
-Every generator takes a cell count (ignored where the case fixes it) and a ``seed`` and returns a
-:class:`~qpcontact.Cells` whose momenta make pairs collide. Units: µm, pg, minutes.
+:data:`SCENES` maps a name to a :class:`Scene`; ``scene.make(seed=..., **size)`` builds it
+(:func:`make_scene`). This module registers the colony snapshots and hand-made cases below;
+:mod:`qpcontact.studies.catalogue` registers the stiff and extreme cases of the stability report
+(importing :mod:`qpcontact.studies` imports both, so the registry is always complete).
+
+Every generator here takes a cell count ``n_cells`` (ignored where the case fixes it) and a
+``seed`` and returns a :class:`~qpcontact.Cells` whose momenta make pairs collide. Units: µm, pg,
+minutes.
 
 Colony snapshots (vectorized; 10⁵ cells take a few seconds):
 
@@ -21,19 +27,19 @@ angular momenta (which make about half of the side-by-side contacts approach). M
 proportional to volume (density ``DENSITY``).
 
 Hand-made cases: :func:`two_rods`, :func:`rod_chain`, :func:`rod_across_many`,
-:func:`jammed_packing` (more contacts than unknowns). :data:`SCENES` maps names to generators.
+:func:`jammed_packing` (more contacts than unknowns).
 """
 
 from __future__ import annotations
 
-from typing import Callable
+from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..geometry.cells import Cells
-from ..geometry.contacts import find_contacts
 from ..errors import InvalidArgumentError
+from ..geometry import Cells, Contacts, capsule_mass, find_contacts, inertia_times
 
 #: Cell radius [µm] (E. coli).
 RADIUS = 0.5
@@ -48,22 +54,63 @@ MAX_OVERLAP = 0.10
 
 
 # ------------------------------------------------------------------------------------------
+# The registry
+# ------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Scene:
+    """One registered scene.
+
+    Attributes:
+        name: unique name.
+        family: the family it belongs to (``hand-made``, ``colony``, and the catalogue's
+            families: ``mass_ratio``, ``geometry``, ...).
+        description: one line: what the scene is (and what makes it hard).
+        make: ``make(seed=..., **size) -> Cells``, deterministic for a seed; ``size`` is the
+            generator's size keyword (``n_cells``, ``n_neighbours``, ...), if it has one.
+        contacts: ``contacts(cells) -> Contacts`` to hand to :func:`qpcontact.resolve`, or None
+            (resolve finds them).
+        options: further keywords for :func:`qpcontact.resolve` (e.g. position correction).
+        large: a full-size scene that tests build smaller.
+    """
+
+    name: str
+    family: str
+    description: str
+    make: Callable[..., Cells]
+    contacts: Callable[[Cells], Contacts] | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+    large: bool = False
+
+
+#: name -> Scene, in registration order.
+SCENES: dict[str, Scene] = {}
+
+
+def register_scene(scene: Scene) -> Scene:
+    """Add a scene to :data:`SCENES`. Returns it.
+
+    Raises:
+        ValueError: the name is taken.
+    """
+    if scene.name in SCENES:
+        raise ValueError(f"scene {scene.name!r} is already registered")
+    SCENES[scene.name] = scene
+    return scene
+
+
+def make_scene(name: str, n_cells: int | None = None, seed: int = 0, **size: Any) -> Cells:
+    """The scene ``name`` from :data:`SCENES` (``n_cells=None`` and no ``size``: the generator's
+    default size)."""
+    if name not in SCENES:
+        raise InvalidArgumentError(f"unknown scene {name!r}; known: {sorted(SCENES)}")
+    if n_cells is not None:
+        size["n_cells"] = n_cells
+    return SCENES[name].make(seed=seed, **size)
+
+
+# ------------------------------------------------------------------------------------------
 # Cells with momenta
 # ------------------------------------------------------------------------------------------
-def capsule_mass(lengths: np.ndarray, radii: np.ndarray, density: float = DENSITY) -> np.ndarray:
-    """Mass of capsules: ``density · (π ρ² l + 4/3 π ρ³)`` [pg]."""
-    return density * np.pi * radii**2 * (lengths + 4.0 / 3.0 * radii)
-
-
-def inertia_times(axes: np.ndarray, lengths: np.ndarray, radii: np.ndarray, masses: np.ndarray,
-                  omega: np.ndarray) -> np.ndarray:
-    """``I ω`` for the inertia tensor of model.md (``I∥ = mρ²/2``, ``I⊥ = m(3ρ² + l²)/12``)."""
-    along = np.einsum("ij,ij->i", axes, omega)[:, None] * axes
-    i_par = masses * radii**2 / 2.0
-    i_perp = masses * (3.0 * radii**2 + lengths**2) / 12.0
-    return i_par[:, None] * along + i_perp[:, None] * (omega - along)
-
-
 def moving_cells(
     rng: np.random.Generator,
     centers: np.ndarray,
@@ -90,7 +137,7 @@ def moving_cells(
     """
     n = centers.shape[0]
     radii = np.full(n, radius)
-    masses = capsule_mass(lengths, radii)
+    masses = capsule_mass(lengths, radii, DENSITY)
     tip_speed = growth_rate * float(np.mean(lengths)) / 2.0 if n else 0.0
     sigma_v = random_speed * tip_speed
     velocity = rng.normal(0.0, sigma_v, (n, 3))
@@ -406,7 +453,8 @@ def jammed_packing(n_cells: int = 61, seed: int = 0) -> Cells:
     centers = np.vstack([mobile, pos[wall]])
     n_all = centers.shape[0]
     axes = np.tile([1.0, 0.0, 0.0], (n_all, 1))
-    masses = np.concatenate([capsule_mass(np.zeros(n_cells), np.full(n_cells, RADIUS)), np.full(n_all - n_cells, np.inf)])
+    masses = np.concatenate([capsule_mass(np.zeros(n_cells), np.full(n_cells, RADIUS), DENSITY),
+                             np.full(n_all - n_cells, np.inf)])
     velocity = -0.05 * centers + rng.normal(0.0, 0.01, (n_all, 3))
     velocity[:, 2] = 0.0
     velocity[n_cells:] = 0.0
@@ -414,19 +462,7 @@ def jammed_packing(n_cells: int = 61, seed: int = 0) -> Cells:
     return Cells(centers=centers, axes=axes, lengths=0.0, radii=RADIUS, masses=masses, momenta=momenta)
 
 
-#: name -> generator ``f(n_cells, seed=0) -> Cells``.
-SCENES: dict[str, Callable[..., Cells]] = {
-    "two_rods": two_rods,
-    "rod_chain": rod_chain,
-    "rod_across_many": rod_across_many,
-    "jammed_packing": jammed_packing,
-    "colony_2d": colony_2d,
-    "colony_3d": colony_3d,
-}
-
-
-def make_scene(name: str, n_cells: int | None = None, seed: int = 0) -> Cells:
-    """The scene ``name`` from :data:`SCENES` (``n_cells=None``: the generator's default)."""
-    if name not in SCENES:
-        raise InvalidArgumentError(f"unknown scene {name!r}; known: {sorted(SCENES)}")
-    return SCENES[name](seed=seed) if n_cells is None else SCENES[name](n_cells, seed=seed)
+for _generator, _family in ((two_rods, "hand-made"), (rod_chain, "hand-made"), (rod_across_many, "hand-made"),
+                           (jammed_packing, "hand-made"), (colony_2d, "colony"), (colony_3d, "colony")):
+    register_scene(Scene(_generator.__name__, _family, (_generator.__doc__ or "").split("\n\n")[0].replace("\n", " "),
+                         _generator))

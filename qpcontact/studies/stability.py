@@ -1,5 +1,5 @@
 """The stability report: every installed solver × formulation on the catalogue of stiff and
-extreme cases (:mod:`qpcontact.catalogue`), with and without the internal scaling.
+extreme cases (:mod:`qpcontact.studies.catalogue`), with and without the internal scaling.
 
 ``qpcontact stability [--cases PATTERN] [--time-limit S] [--out docs/data/stability]`` writes
 ``<out>.csv`` (one row per case × solver × formulation × scaling, every measure) and
@@ -21,8 +21,9 @@ that runs with ``scale=False`` are measured the same way):
 - every impulse finite;
 - penetration ≤ the reference's + :data:`KKT_LIMIT`;
 - distance ``‖x − x*‖_W/‖x*‖_W`` to the reference ``x*`` of the same formulation
-  (:func:`qpcontact.validation.reference_solution`; for the plain linear solve the
-  minimum-norm solve at :data:`REFERENCE_TOLERANCE`) ≤ :data:`DISTANCE_LIMIT`;
+  (:func:`qpcontact.resolve.reference_solution`; for the plain linear solve the
+  minimum-norm solve at :data:`qpcontact.studies.harness.REFERENCE_TOLERANCE`) ≤
+  :data:`DISTANCE_LIMIT`;
 - relative duality gap and multiplier consistency (where the solver gives contact impulses)
   ≤ :data:`KKT_LIMIT` (the complementarity residual is reported, not checked: interior-point
   methods drive it down only like the square root of their tolerance, measured 1e-4–5e-4 on
@@ -31,32 +32,31 @@ that runs with ``scale=False`` are measured the same way):
 - relative kinetic energy change ≤ :data:`KKT_LIMIT` (inelastic contact; skipped for cases with
   position correction, which legitimately adds energy to clear overlaps).
 
-Every run happens in a forked child process killed after the guard, so no backend can hang the
-report.
+Every run happens in a child process killed after the guard
+(:func:`qpcontact.studies.harness.guarded`), so no backend can hang the report.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import fnmatch
 import multiprocessing
 import platform
 import time
 import traceback
-from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..assembly import ContactSystem, build_system
 from ..errors import QPContactError
-from ..geometry import Cells, Contacts, colliding, find_contacts
-from ..resolve import metrics, reference_solution, resolve
-from ..solvers import DEFAULT_FORM, FORMULATIONS, QP_FORMULATIONS, available_solvers, get_solver, solve_min_norm
-from .catalogue import CATALOGUE, Case
+from ..resolve import metrics, resolve
+from ..solvers import DEFAULT_FORM, FORMULATIONS, QP_FORMULATIONS, available_solvers, get_solver
+from . import harness
+from .catalogue import CATALOGUE
+from .harness import Prepared
+from .scenes import Scene
 
 #: Solver tolerance of every run (dimensionless).
 TOLERANCE = 1e-6
@@ -70,61 +70,19 @@ KKT_LIMIT = 100 * TOLERANCE
 #: ≤ KKT_LIMIT bounds the relative distance by ``sqrt(2·KKT_LIMIT)`` = 1.4e-2 at tolerance 1e-6
 #: (docs/stability.md). The measured distances are reported; most are far smaller.
 DISTANCE_LIMIT = float(np.sqrt(2 * KKT_LIMIT))
-#: Optimality tolerance of the reference linear solve (LSMR cannot reach 1e-12 on the jammed
-#: packings: it stops at 3e-11).
-REFERENCE_TOLERANCE = 1e-10
 #: Runs faster than this [s] are repeated (``--repeats``) and timed by their median.
 REPEAT_BELOW = 1.0
 #: Outcomes, best first.
 OUTCOMES = ("ok", "error", "wrong", "crash", "timeout")
 
 
-@dataclass
-class Prepared:
-    """A catalogue case built, with its scaled system and reference solutions.
-
-    Attributes:
-        case: the catalogue entry.
-        cells, contacts: the scene and the contacts handed to resolve (None: found by resolve).
-        system: the scaled system of the colliding contacts (None if nothing collides).
-        references: formulation (``"linear"`` for the plain solve) -> reference ``ỹ*``.
-        reference_penetration: formulation -> penetration of its reference.
-        condition: ``cond₁`` estimate of the scaled Delassus operator (None: singular, LU failed).
-        condition_seconds: time of the linear solve with the estimate.
-        linear_seconds: time of the same solve without it.
-    """
-
-    case: Case
-    cells: Cells
-    contacts: Contacts | None
-    system: ContactSystem | None
-    references: dict[str, np.ndarray]
-    reference_penetration: dict[str, float]
-    condition: float | None
-    condition_seconds: float
-    linear_seconds: float
-
-
-def prepare(case: Case, seed: int = 0, size: dict[str, Any] | None = None) -> Prepared:
-    """Build the case's scene and system, and compute the references and condition estimate."""
-    cells = case.make(seed, **(size or {}))
+def prepare(case: Scene, seed: int = 0, size: dict[str, Any] | None = None) -> Prepared:
+    """Build the case's scene and system, and compute the references and condition estimate
+    (:func:`qpcontact.studies.harness.prepare`)."""
+    cells = case.make(seed=seed, **(size or {}))
     contacts = case.contacts(cells) if case.contacts else None
-    found = contacts if contacts is not None else find_contacts(cells)
     opts = {k: v for k, v in case.options.items() if k in ("position_correction", "dt")}
-    active, b = colliding(found, **opts)
-    if len(active) == 0:
-        return Prepared(case, cells, contacts, None, {}, {}, None, 0.0, 0.0)
-    system = build_system(cells, active, b)
-    t0 = time.perf_counter()
-    lin = solve_min_norm(system.matrix, system.rhs, tolerance=REFERENCE_TOLERANCE)
-    t1 = time.perf_counter()
-    with_cond = solve_min_norm(system.matrix, system.rhs, tolerance=REFERENCE_TOLERANCE, estimate_condition=True)
-    t2 = time.perf_counter()
-    references = {"linear": lin.y}
-    for formulation in QP_FORMULATIONS:
-        references[formulation] = reference_solution(system, formulation)
-    pen = {name: metrics.penetration(system, y) for name, y in references.items()}
-    return Prepared(case, cells, contacts, system, references, pen, with_cond.condition_estimate, t2 - t1, t1 - t0)
+    return harness.prepare(case, cells, contacts, condition=True, **opts)
 
 
 def runs(solvers: list[str], formulations: list[str], forms: list[str]) -> list[tuple[str, str, str]]:
@@ -211,47 +169,24 @@ def run_one(prep: Prepared, solver: str, formulation: str, form: str, scale: boo
     return row
 
 
-def _child(conn: Any, prep: Prepared, args: tuple) -> None:
-    try:
-        conn.send(run_one(prep, *args))
-    except BaseException as exc:  # noqa: BLE001 - report whatever happened to the parent
-        conn.send({"outcome": "crash", "message": f"{type(exc).__name__}: {exc}"})
-    finally:
-        conn.close()
-
-
 def guarded(prep: Prepared, solver: str, formulation: str, form: str, scale: bool, time_limit: float,
             guard: float, repeats: int = 1) -> dict[str, Any]:
-    """:func:`run_one` in a forked child, killed after ``guard`` seconds (outcome ``timeout``)."""
-    # forkserver, not fork: a child forked from a parent that already ran Clarabel (the
-    # references) can deadlock on the inherited thread pool (measured: 20 s guard hit on a solve
-    # that takes 0.08 s in a fresh process).
-    ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["qpcontact.studies.stability"])
-    parent, child = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(child, prep, (solver, formulation, form, scale, time_limit, repeats)))
+    """:func:`run_one` in a child process (:func:`qpcontact.studies.harness.guarded`), killed
+    after ``guard`` seconds (outcome ``timeout``)."""
     t0 = time.perf_counter()
-    proc.start()
-    child.close()
-    row = None
-    if parent.poll(guard):
-        try:
-            row = parent.recv()
-        except EOFError:
-            row = None
-    proc.join(timeout=1.0)
-    if proc.is_alive():
-        proc.kill()
-        proc.join()
+    status, payload = harness.guarded(run_one, (prep, solver, formulation, form, scale, time_limit, repeats), guard,
+                                      preload=("qpcontact.studies.stability",))
     base = {"case": prep.case.name, "family": prep.case.family, "solver": solver, "formulation": formulation,
             "form": form, "scale": scale}
-    if row is None:
-        elapsed = time.perf_counter() - t0
-        if elapsed >= guard:
-            return {**base, "outcome": "timeout", "seconds": elapsed,
-                    "message": f"no answer within the {guard:g} s guard (time_limit {time_limit:g} s was not honoured)"}
-        return {**base, "outcome": "crash", "seconds": elapsed, "message": f"child process died (exit code {proc.exitcode})"}
-    return {**base, **row}
+    elapsed = time.perf_counter() - t0
+    if status == "ok":
+        return {**base, **payload}
+    if status == "timeout":
+        return {**base, "outcome": "timeout", "seconds": elapsed,
+                "message": f"no answer within the {guard:g} s guard (time_limit {time_limit:g} s was not honoured)"}
+    if status == "crashed":
+        return {**base, "outcome": "crash", "seconds": elapsed, "message": f"child process died (exit code {payload})"}
+    return {**base, "outcome": "crash", "seconds": elapsed, "message": str(payload)}
 
 
 # ------------------------------------------------------------------------------------------
@@ -262,20 +197,8 @@ CSV_FIELDS = ("case", "family", "solver", "formulation", "form", "scale", "outco
               "momentum_change", "angular_momentum_change", "energy_change_relative", "message")
 
 
-def _fmt(value: Any) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, float):
-        return f"{value:.3g}"
-    return str(value)
-
-
 def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    with path.open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=CSV_FIELDS, extrasaction="ignore")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: _fmt(row.get(k)) for k in CSV_FIELDS})
+    harness.write_csv(rows, path, CSV_FIELDS, digits=3)
 
 
 def _column(row: dict[str, Any]) -> str:

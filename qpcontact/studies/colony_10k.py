@@ -2,43 +2,41 @@
 
 Starts from a colony snapshot (``qpcontact simulate --cells N``; the newest snapshot in a folder
 when a folder is given) or from ``colony_2d:N``, the packed monolayer of
-:func:`qpcontact.scenes.colony_2d` (growth inertia and rates as ``qpcontact simulate``), and from
-that same state takes --steps growth steps with each solver (``qpcontact simulate`` settings
-otherwise).
+:func:`qpcontact.studies.scenes.colony_2d` (growth inertia and rates as ``qpcontact simulate``),
+and from that same state takes --steps growth steps with each solver (``qpcontact simulate``
+settings otherwise).
 Records per step: cells, contacts in the system, unknowns, wall time of the step, contact-solve
 time (setup + solve), and the largest and mean overlap (fraction of the diameter) of the state
 the step starts from; and the overlaps of the final state. Medians over the steps.
 
-    flock /tmp/qpcontact-bench.lock python docs/data/colony_10k.py colony_2d:10000 SNAPSHOT.npz
+    flock /tmp/qpcontact-bench.lock python -m qpcontact.studies.colony_10k colony_2d:10000 SNAPSHOT.npz
 """
 
 from __future__ import annotations
 
 import argparse
 import platform
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from qpcontact.contacts import find_contacts
-from qpcontact.growth import Colony, divide, expansion_time_step, grow
-from qpcontact.scenes import colony_2d
-from qpcontact.simulate import Settings
-from qpcontact.snapshots import load_colony
-from qpcontact.step import overlap_fractions
+from ..colony import Colony, Settings, divide, expansion_time_step, grow, load_colony, overlap_fractions
+from ..geometry import find_contacts
+from .scenes import colony_2d
 
-HERE = Path(__file__).resolve().parent
 CONFIGS = ["osqp@1e-3", "osqp@1e-4", "clarabel@1e-6", "mprgp@1e-6"]
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m qpcontact.studies.colony_10k",
+                                     description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("starts", nargs="+", help="snapshot .npz, folder of snapshots, or colony_2d:N")
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--solvers", nargs="+", default=CONFIGS, help="solver@tolerance, each run from the same start")
-    parser.add_argument("--out", type=Path, default=HERE / "colony_10k.md")
-    args = parser.parse_args()
+    parser.add_argument("--out", type=Path, default=Path("docs/data/colony_10k.md"), help="the table (Markdown)")
+    args = parser.parse_args(argv)
     s = Settings()
     lines = [
         f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {platform.machine()} (2 cores shared with "
@@ -50,32 +48,35 @@ def main() -> None:
     for spec in args.starts:
         start, label = load_start(spec, s)
         lines += measure(start, label, s, args.steps, [(c.split("@")[0], float(c.split("@")[1])) for c in args.solvers])
+    args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
+    return 0
 
 
 def load_start(spec: str, s: Settings) -> tuple[Colony, str]:
     """The starting colony and a label for the table."""
     if spec.startswith("colony_2d:"):
-        n = int(spec.split(":")[1])
-        cells = colony_2d(n, seed=0, growth_inertia=s.growth_inertia)
-        rates = s.rate * (1.0 + s.rate_noise * np.random.default_rng(0).standard_normal(n))
-        return Colony.founder(cells, np.maximum(rates, 0.0)), f"scenes.colony_2d({n}) packed layer"
+        n_cells = int(spec.split(":")[1])
+        cells = colony_2d(n_cells, seed=0, growth_inertia=s.growth_inertia)
+        rates = s.rate * (1.0 + s.rate_noise * np.random.default_rng(0).standard_normal(n_cells))
+        return Colony.founder(cells, np.maximum(rates, 0.0)), f"scenes.colony_2d({n_cells}) packed layer"
     path = Path(spec)
     if path.is_dir():
         path = sorted(path.glob("step_*.npz"))[-1]
-    colony, step = load_colony(path)
+    colony, _ = load_colony(path)
     return colony, f"grown by `qpcontact simulate` to {colony.cells.n} cells (t = {colony.time:.2f})"
 
 
 def measure(start: Colony, label: str, s: Settings, steps: int, configs: list[tuple[str, float]]) -> list[str]:
+    """Table rows: ``steps`` growth steps from ``start`` with each ``(solver, tolerance)``."""
     lines = []
     for solver, tolerance in configs:
         colony = start
         rng = np.random.default_rng(0)
         rows, error = [], ""
         for _ in range(steps):
-            dt = expansion_time_step(colony, max_dt=s.max_dt, cfl=s.cfl)
+            dt = expansion_time_step(colony, max_dt=s.max_dt, cfl=s.cfl, dimensions=2)
             t0 = time.perf_counter()
             try:
                 colony, out = grow(colony, dt, planar=True, solver=solver, tolerance=tolerance, margin=s.margin,
@@ -102,4 +103,4 @@ def measure(start: Colony, label: str, s: Settings, steps: int, configs: list[tu
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -6,10 +6,11 @@ whole run (median of the repeats), the contact-solve time, and the overlaps reac
 over the run, the 99th percentile of the per-step largest, and the run's mean (time average of
 each step's mean overlap over the overlapping contacts), all as fractions of the diameter.
 
-Writes docs/data/colony_benchmark.csv, docs/data/colony_benchmark.md (table) and
-docs/img/colony_error_time.png. Run it under ``flock /tmp/qpcontact-bench.lock``:
+Writes ``OUT/data/colony_benchmark.csv``, ``OUT/data/colony_benchmark.md`` (table) and
+``OUT/img/colony_error_time.png`` (``--out-dir OUT``, default ``docs``). Run it from the
+repository root under ``flock /tmp/qpcontact-bench.lock``:
 
-    flock /tmp/qpcontact-bench.lock python docs/data/colony_benchmark.py
+    flock /tmp/qpcontact-bench.lock python -m qpcontact.studies.colony_benchmark
 """
 
 from __future__ import annotations
@@ -19,21 +20,22 @@ import csv
 import dataclasses
 import os
 import platform
+import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-import qpcontact
-from qpcontact.simulate import Settings, run_colony
+from ..colony import Settings, run_colony
+from ..solvers import available_solvers
 
-HERE = Path(__file__).resolve().parent
 #: A configuration is not repeated further once its runs took this long (the table says how
 #: many repeats each row is the median of).
 BUDGET_SECONDS = 60.0
 
 #: (label, changes to the default Settings)
-CONFIGS = [
+CONFIGS: list[tuple[str, dict[str, Any]]] = [
     ("linear", dict(solver="linear")),
     ("osqp 1e-3", dict(solver="osqp", tolerance=1e-3)),
     ("osqp 1e-4", dict(solver="osqp", tolerance=1e-4)),
@@ -48,15 +50,18 @@ CONFIGS = [
 ]
 
 
-def measure(label: str, changes: dict, cells: int, repeats: int) -> dict:
-    walls, solves = [], []
+def measure(label: str, changes: dict[str, Any], cells: int, repeats: int) -> dict[str, Any]:
+    """One row: the configuration's whole runs to ``cells`` cells (up to ``repeats`` of them)."""
+    walls: list[float] = []
+    solves: list[float] = []
     run = None
-    for _ in range(repeats):
-        run = run_colony(dataclasses.replace(Settings(cells=cells), **changes), progress=False)
+    for _ in range(max(1, repeats)):
+        run = run_colony(dataclasses.replace(Settings(n_cells=cells), **changes), progress=False)
         walls.append(run.wall_seconds)
         solves.append(float(np.sum(run.history["solve_seconds"])))
         if run.error or sum(walls) > BUDGET_SECONDS:
             break
+    assert run is not None
     h = {k: np.asarray(v, dtype=float) for k, v in run.history.items()}
     return {
         "config": label,
@@ -75,14 +80,20 @@ def measure(label: str, changes: dict, cells: int, repeats: int) -> dict:
     }
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m qpcontact.studies.colony_benchmark",
+                                     description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--cells", type=int, default=500)
     parser.add_argument("--repeats", type=int, default=3)
-    args = parser.parse_args()
-    installed = qpcontact.available_solvers()
+    parser.add_argument("--configs", nargs="+", metavar="LABEL", help="only these configurations (default: all)")
+    parser.add_argument("--out-dir", type=Path, default=Path("docs"),
+                        help="writes data/colony_benchmark.csv, data/colony_benchmark.md, img/colony_error_time.png")
+    args = parser.parse_args(argv)
+    installed = available_solvers()
     rows = []
     for label, changes in CONFIGS:
+        if args.configs and label not in args.configs:
+            continue
         if changes["solver"] not in installed:
             print(f"{label}: solver not installed, skipped")
             continue
@@ -93,7 +104,12 @@ def main() -> None:
               f"max {row['max_overlap']:.4f}  p99 {row['p99_overlap']:.4f}  mean {row['mean_overlap']:.5f}  "
               f"{row['error'][:80]}  ({time.perf_counter() - t0:.0f} s)", flush=True)
 
-    with open(HERE / "colony_benchmark.csv", "w", newline="") as handle:
+    if not rows:
+        print("no configuration ran")
+        return 1
+    data = args.out_dir / "data"
+    data.mkdir(parents=True, exist_ok=True)
+    with open(data / "colony_benchmark.csv", "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
@@ -112,17 +128,17 @@ def main() -> None:
         note = f"FAILED: {r['error']}" if r["error"] else ""
         lines.append(f"| {r['config']} | {r['steps']} | {r['repeats']} | {r['wall_s']:.1f} | {r['solve_s']:.1f} | {r['ms_per_step']:.1f} | "
                      f"{r['max_overlap']:.4f} | {r['p99_overlap']:.4f} | {r['mean_overlap']:.5f} | {note} |")
-    (HERE / "colony_benchmark.md").write_text("\n".join(lines) + "\n")
-    plot(rows, HERE.parent / "img" / "colony_error_time.png", args.cells)
+    (data / "colony_benchmark.md").write_text("\n".join(lines) + "\n")
+    plot(rows, args.out_dir / "img" / "colony_error_time.png", args.cells)
+    return 0
 
 
-def plot(rows: list[dict], path: Path, cells: int) -> None:
-    import matplotlib
+def plot(rows: list[dict[str, Any]], path: Path, cells: int) -> None:
+    """Largest and mean overlap against the wall time of the whole run, one point per row."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.5), dpi=110)
+    fig = Figure(figsize=(11, 4.5), dpi=110)
+    axes = fig.subplots(1, 2)
     for ax, key, name in ((axes[0], "max_overlap", "largest overlap over the run"),
                           (axes[1], "mean_overlap", "mean overlap over the run")):
         for r in rows:
@@ -136,8 +152,7 @@ def plot(rows: list[dict], path: Path, cells: int) -> None:
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
-    plt.close(fig)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

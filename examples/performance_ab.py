@@ -2,13 +2,15 @@
 
 Usage (under the benchmark lock, from the repository root):
 
-    flock /tmp/qpcontact-bench.lock python docs/data/performance_ab.py OLD_CHECKOUT [--sizes ...]
+    flock /tmp/qpcontact-bench.lock python examples/performance_ab.py OLD_CHECKOUT [--sizes ...]
 
 ``OLD_CHECKOUT`` is a directory holding the ``qpcontact`` package as it was before the change
 (e.g. ``git worktree add /tmp/old 28997b8``... or any copy). For each colony snapshot the script
 times, interleaved and with repeats (median), detection and assembly with the old and the new
-package, then the QP solve with and without the split into independent components, and checks
-that old and new give the same contacts and matrix. Prints a Markdown table.
+package (through the top-level names ``Cells``, ``find_contacts``, ``colliding`` and
+``build_system``, which both layouts have), then the QP solve of the new package with and
+without the split into independent blocks, and checks that old and new give the same contacts
+and matrix. Prints a Markdown table.
 """
 
 from __future__ import annotations
@@ -19,25 +21,27 @@ import importlib
 import sys
 import time
 from pathlib import Path
+from types import ModuleType
+from typing import Any, Callable
 
 import numpy as np
 
 
-def load(root: str | None):
+def load(root: str | None) -> ModuleType:
     """Import a fresh ``qpcontact`` from ``root`` (None: the installed one)."""
     for name in [m for m in sys.modules if m == "qpcontact" or m.startswith("qpcontact.")]:
         del sys.modules[name]
     if root:
         sys.path.insert(0, root)
     try:
-        return {m: importlib.import_module(f"qpcontact.{m}") for m in ("cells", "contacts", "system", "qp", "metrics")}
+        return importlib.import_module("qpcontact")
     finally:
         if root:
             sys.path.remove(root)
 
 
-def median_time(fn, repeats):
-    times = []
+def median_time(fn: Callable[[], Any], repeats: int) -> tuple[Any, float]:
+    times, out = [], None
     for _ in range(repeats):
         t0 = time.perf_counter()
         out = fn()
@@ -49,49 +53,50 @@ def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("old")
     p.add_argument("--sizes", type=int, nargs="+", default=[10000, 100000])
-    p.add_argument("--dims", type=int, nargs="+", default=[2, 3])
+    p.add_argument("--dimensions", type=int, nargs="+", default=[2, 3])
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--solvers", nargs="+", default=["osqp/primal", "osqp/contact"])
     args = p.parse_args()
     old, new = load(args.old), load(None)
-    from qpcontact.bench import load_scene  # noqa: E402  (the new package)
-    from qpcontact.validation import reference_solution
+    from qpcontact.resolve import metrics, reference_solution  # the new package from here on
+    from qpcontact.solvers import Problem, solve
+    from qpcontact.studies.bench import load_scene
 
     cache = Path.home() / ".cache" / "qpcontact-bench"
     print("| scene | cells | phase | before s | after s | speed-up | same answer |")
     print("|---|---|---|---|---|---|---|")
-    for dim in args.dims:
-        for n in args.sizes:
-            cells_new = load_scene(dim, n, 0, cache)
+    for dimensions in args.dimensions:
+        for n_cells in args.sizes:
+            cells_new = load_scene(dimensions, n_cells, 0, cache)
             fields = {f.name: getattr(cells_new, f.name) for f in dataclasses.fields(cells_new)}
-            cells_old = old["cells"].Cells(**fields)
+            cells_old = old.Cells(**fields)
             rows = []
-            for label, mods, cells in (("before", old, cells_old), ("after", new, cells_new)):
-                def detect(mods=mods, cells=cells):
-                    return mods["contacts"].colliding(mods["contacts"].find_contacts(cells, planar=dim == 2))
+            for package, cells in ((old, cells_old), (new, cells_new)):
+                def detect(package: ModuleType = package, cells: Any = cells) -> Any:
+                    return package.colliding(package.find_contacts(cells, planar=dimensions == 2))
                 (active, b), t_detect = median_time(detect, args.repeats)
-                system, t_assemble = median_time(lambda: mods["system"].build_system(cells, active, b), args.repeats)
+                system, t_assemble = median_time(lambda: package.build_system(cells, active, b), args.repeats)
                 rows.append((t_detect, t_assemble, active, system))
             (d0, a0, c0, s0), (d1, a1, c1, s1) = rows
             same_contacts = all(np.allclose(getattr(c0, f.name), getattr(c1, f.name), rtol=1e-9, atol=1e-12)
                                 for f in dataclasses.fields(c1))
             same_matrix = s0.shape == s1.shape and abs(s0.matrix - s1.matrix).max() <= 1e-12
-            print(f"| {dim}D | {n} | detect | {d0:.3g} | {d1:.3g} | {d0 / d1:.2f}× | {same_contacts} |")
-            print(f"| {dim}D | {n} | assemble | {a0:.3g} | {a1:.3g} | {a0 / a1:.2f}× | {same_matrix} |")
-            qp, timed = new["qp"], {}
+            print(f"| {dimensions}D | {n_cells} | detect | {d0:.3g} | {d1:.3g} | {d0 / d1:.2f}× | {same_contacts} |")
+            print(f"| {dimensions}D | {n_cells} | assemble | {a0:.3g} | {a1:.3g} | {a0 / a1:.2f}× | {same_matrix} |")
+            timed = {}
             for spec in args.solvers:
                 solver, form = spec.split("/")
                 for split in (False, True):
                     timed[spec, split] = median_time(
-                        lambda: qp.solve_qp_system(s1, solver, "complementarity", form, tolerance=1e-6, split=split),
+                        lambda: solve(Problem.of(s1), solver, "complementarity", form, tolerance=1e-6, split=split),
                         max(1, args.repeats - 1))
             guess = next(out.lam for out, _ in timed.values() if out.lam is not None)
             reference = reference_solution(s1, "complementarity", guess=guess)
             for spec in args.solvers:
                 (whole, t0), (split, t1) = timed[spec, False], timed[spec, True]
-                e0, e1 = (new["metrics"].distance(o.y, reference) if o.y is not None else float("nan") for o in (whole, split))
-                print(f"| {dim}D | {n} | {spec} whole → {split.extras.get('blocks')} blocks | {t0:.3g} | {t1:.3g} | "
-                      f"{t0 / t1:.2f}× | error {e0:.1e} → {e1:.1e} |")
+                e0, e1 = (metrics.distance(o.y, reference) if o.y is not None else float("nan") for o in (whole, split))
+                print(f"| {dimensions}D | {n_cells} | {spec} whole → {split.extras.get('blocks')} blocks | {t0:.3g} | "
+                      f"{t1:.3g} | {t0 / t1:.2f}× | error {e0:.1e} → {e1:.1e} |")
             sys.stdout.flush()
 
 
