@@ -159,7 +159,7 @@ def build_system(
 
     Args:
         cells: the scene.
-        contacts: the colliding contacts (see :func:`qpcontact.contacts.colliding`).
+        contacts: the colliding contacts (see :func:`qpcontact.geometry.colliding`).
         b: (K,) required change of normal velocity, > 0 [length/time].
         reduce: leave out the unknowns the scene does not need (default). ``False`` keeps all
             seven slots of every cell (for tests: the answer must not change).

@@ -1,4 +1,5 @@
-"""Pictures of a colony run (matplotlib, headless ``Agg`` backend).
+"""Pictures of a colony run (matplotlib's object-oriented API: figures are drawn and saved
+without pyplot, so importing this module leaves the process's matplotlib backend alone).
 
 - :func:`draw_colony`: the cells seen from above (+z), each capsule outlined exactly and
   coloured by the orientation of its axis in the xy-plane (a cyclic colour map: a rod and its
@@ -13,15 +14,13 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Mapping, Sequence
 
-import matplotlib
+import numpy as np
+from matplotlib.animation import FuncAnimation, PillowWriter
+from matplotlib.axes import Axes
+from matplotlib.collections import PolyCollection
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.animation import FuncAnimation, PillowWriter  # noqa: E402
-from matplotlib.collections import PolyCollection  # noqa: E402
-
-from ..geometry.cells import Cells  # noqa: E402
+from ..geometry import Cells
 
 #: Points per semicircular cap of a drawn capsule.
 CAP_POINTS = 8
@@ -43,7 +42,7 @@ def capsule_outlines(cells: Cells) -> np.ndarray:
     return centre + offset
 
 
-def draw_colony(ax: plt.Axes, cells: Cells, *, title: str | None = None, colorbar: bool = True) -> PolyCollection:
+def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: bool = True) -> PolyCollection:
     """Draw the cells on ``ax`` from above, coloured by axis orientation (0–180°)."""
     orientation = np.degrees(np.arctan2(cells.axes[:, 1], cells.axes[:, 0])) % 180.0
     # Cells lower down are drawn first, so the top layer of a 3D biofilm is what one sees.
@@ -58,18 +57,17 @@ def draw_colony(ax: plt.Axes, cells: Cells, *, title: str | None = None, colorba
     ax.set_ylabel("y")
     if title:
         ax.set_title(title)
-    if colorbar:
+    if colorbar and ax.figure is not None:
         ax.figure.colorbar(polys, ax=ax, label="axis orientation in the xy-plane [deg]", shrink=0.8)
     return polys
 
 
 def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None) -> Path:
     """Draw the colony and save it as an image (PNG, SVG, ... by the file suffix)."""
-    fig, ax = plt.subplots(figsize=(7, 6), dpi=120)
-    draw_colony(ax, cells, title=title)
+    fig = Figure(figsize=(7, 6), dpi=120)
+    draw_colony(fig.subplots(), cells, title=title)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
     return Path(path)
 
 
@@ -79,7 +77,8 @@ def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title
     residuals. ``history`` holds equal-length sequences ``time``, ``cells``, ``max_overlap``,
     ``mean_overlap``, ``solve_seconds``, ``penetration`` and (optionally) ``complementarity``."""
     t = np.asarray(history["time"])
-    fig, axes = plt.subplots(2, 2, figsize=(10, 7), dpi=110, sharex=True)
+    fig = Figure(figsize=(10, 7), dpi=110)
+    axes = fig.subplots(2, 2, sharex=True)
     axes[0, 0].semilogy(t, history["cells"])
     axes[0, 0].set_ylabel("cells")
     axes[0, 1].semilogy(t, np.maximum(history["max_overlap"], 1e-6), label="largest", lw=0.8)
@@ -100,13 +99,13 @@ def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title
         fig.suptitle(title)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
     return Path(path)
 
 
 def animate(path: str | Path, frames: Sequence[tuple[float, Cells]], fps: int = 10) -> Path:
     """A GIF of ``(time, cells)`` frames, all drawn with the limits of the last (largest) one."""
-    fig, ax = plt.subplots(figsize=(6, 6), dpi=90)
+    fig = Figure(figsize=(6, 6), dpi=90)
+    ax = fig.subplots()
     last = capsule_outlines(frames[-1][1]).reshape(-1, 2)
     lo, hi = last.min(axis=0), last.max(axis=0)
     pad = 0.05 * float((hi - lo).max())
@@ -120,5 +119,4 @@ def animate(path: str | Path, frames: Sequence[tuple[float, Cells]], fps: int = 
 
     animation = FuncAnimation(fig, draw, frames=len(frames))
     animation.save(str(path), writer=PillowWriter(fps=fps))
-    plt.close(fig)
     return Path(path)

@@ -8,7 +8,7 @@ A step from state ``t`` to ``t + dt`` (velocity-level, semi-implicit Euler):
    ``dynamics="inertial"``: the momenta carry over, linear and angular momentum damped by
    ``exp(−damping·dt)``, and ``drive`` (if given) is added as an external impulse.
 2. *Contacts.* Cell–cell contacts (:func:`qpcontact.find_contacts`) plus one-sided contacts with
-   static planes (:mod:`qpcontact.surfaces`), resolved by :func:`qpcontact.resolve` with any
+   static planes (:mod:`qpcontact.geometry.surfaces`), resolved by :func:`qpcontact.resolve` with any
    solver, formulation, form and tolerance; with ``position_correction`` β the solve also
    clears a fraction β of each overlap within the step. With ``margin > 0`` the contacts are
    *speculative*: a pair at a gap ``d > 0`` may approach, but by no more than ``d`` within the
@@ -112,7 +112,7 @@ def overlap_fractions(cells: Cells, contacts: Contacts) -> np.ndarray:
 
 
 def largest_overlap(cells: Cells, planes: Sequence[Any] = ()) -> float:
-    """Largest overlap of two cells, or of a cell and a plane (:mod:`qpcontact.surfaces`), as a
+    """Largest overlap of two cells, or of a cell and a plane (:mod:`qpcontact.geometry.surfaces`), as a
     fraction of the diameter (:func:`overlap_fractions`; 0 when nothing overlaps)."""
     contacts = concatenate([find_contacts(cells), plane_contacts(cells, planes, 0.0)])
     return float(overlap_fractions(cells, contacts).max(initial=0.0))
@@ -179,7 +179,7 @@ def step(
         drive: (N, 7) driving generalized momenta ``(p, L, g)`` [momentum units]: overdamped,
             the momenta before contact; inertial, an impulse added before contact. None = 0.
         damping: inertial only: rate γ [1/time] of ``p, L ← exp(−γ dt)·(p, L)``.
-        planes: static planes (:class:`qpcontact.surfaces.Plane`), one-sided contacts.
+        planes: static planes (:class:`qpcontact.geometry.Plane`), one-sided contacts.
         margin: contacts closer than this count [length].
         planar: 2D monolayer mode. True: the scene must stay in the xy-plane and is solved with
             the planar unknowns only (an error if it leaves the plane); None: detected.

@@ -162,7 +162,7 @@ def _closest_parameters(e, f, k, ha, hb):
 def _fallback_normals(cells: Cells, a: np.ndarray, b: np.ndarray, planar: bool) -> np.ndarray:
     """Normals for pairs whose axis closest points coincide (crossing or coincident axes):
     ``â × b̂``, else the centre difference, else a fixed axis normal to ``â`` (``e₁`` of
-    :func:`qpcontact.cells.perpendicular_basis`, which lies in the plane for planar scenes).
+    :func:`qpcontact.geometry.perpendicular_basis`, which lies in the plane for planar scenes).
     In a planar scene ``â × b̂`` leaves the plane and is skipped. Oriented so that
     ``n·(c_a − c_b) >= 0``."""
     diff = cells.centers[a] - cells.centers[b]

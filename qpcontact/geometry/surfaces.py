@@ -68,7 +68,7 @@ def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -
     parts = []
     for plane in planes:
         if not isinstance(plane, Plane):
-            raise InvalidArgumentError(f"planes: expected qpcontact.surfaces.Plane objects, got {type(plane).__name__}")
+            raise InvalidArgumentError(f"planes: expected qpcontact.geometry.Plane objects, got {type(plane).__name__}")
         normal = np.asarray(plane.normal)
         for side in (-0.5, 0.5):
             offset_axis = side * cells.lengths[:, None] * cells.axes
