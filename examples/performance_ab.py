@@ -20,9 +20,10 @@ import dataclasses
 import importlib
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -71,11 +72,15 @@ def main() -> None:
             fields = {f.name: getattr(cells_new, f.name) for f in dataclasses.fields(cells_new)}
             cells_old = old.Cells(**fields)
             rows = []
+            planar = dimensions == 2
             for package, cells in ((old, cells_old), (new, cells_new)):
-                def detect(package: ModuleType = package, cells: Any = cells) -> Any:
-                    return package.colliding(package.find_contacts(cells, planar=dimensions == 2))
-                (active, b), t_detect = median_time(detect, args.repeats)
-                system, t_assemble = median_time(lambda: package.build_system(cells, active, b), args.repeats)
+                (active, b), t_detect = median_time(
+                    lambda package=package, cells=cells, planar=planar: package.colliding(
+                        package.find_contacts(cells, planar=planar)),
+                    args.repeats)
+                system, t_assemble = median_time(
+                    lambda package=package, cells=cells, active=active, b=b: package.build_system(cells, active, b),
+                    args.repeats)
                 rows.append((t_detect, t_assemble, active, system))
             (d0, a0, c0, s0), (d1, a1, c1, s1) = rows
             same_contacts = all(np.allclose(getattr(c0, f.name), getattr(c1, f.name), rtol=1e-9, atol=1e-12)
@@ -88,7 +93,8 @@ def main() -> None:
                 solver, form = spec.split("/")
                 for split in (False, True):
                     timed[spec, split] = median_time(
-                        lambda: solve(Problem.of(s1), solver, "complementarity", form, tolerance=1e-6, split=split),
+                        lambda s1=s1, solver=solver, form=form, split=split: solve(
+                            Problem.of(s1), solver, "complementarity", form, tolerance=1e-6, split=split),
                         max(1, args.repeats - 1))
             guess = next(out.lam for out, _ in timed.values() if out.lam is not None)
             reference = reference_solution(s1, "complementarity", guess=guess)

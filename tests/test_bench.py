@@ -10,16 +10,14 @@ import json
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from conftest import random_scene
 
 import qpcontact as qc
-from qpcontact.studies import bench
+from qpcontact.assembly.system import slot_basis, slot_directions
+from qpcontact.geometry.contacts import candidate_pairs, narrow_phase
 from qpcontact.resolve import metrics
 from qpcontact.solvers import Problem, blocks, solve
-from qpcontact.studies import scenes
-from qpcontact.geometry.contacts import candidate_pairs, narrow_phase
-from qpcontact.assembly.system import slot_basis, slot_directions
-
-from conftest import random_scene
+from qpcontact.studies import bench, scenes
 
 
 def test_quick_bench_writes_the_table_plot_and_data(tmp_path):

@@ -24,8 +24,8 @@ def test_scalars_broadcast_and_inputs_are_copied():
 
 def test_inverse_inertia_is_the_axisymmetric_solid_cylinder():
     cells = make(masses=3.0)
-    m, rho, l = 3.0, 0.5, 2.0
-    i_par, i_perp = m * rho**2 / 2, m * (3 * rho**2 + l**2) / 12
+    m, rho, length = 3.0, 0.5, 2.0
+    i_par, i_perp = m * rho**2 / 2, m * (3 * rho**2 + length**2) / 12
     w = np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 3.0]])
     got = cells.apply_inverse_inertia(w)[0]
     assert np.allclose(got, [1 / i_par, 2 / i_perp, 3 / i_perp])  # axis of cell 0 is x

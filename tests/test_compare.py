@@ -8,16 +8,12 @@ import numpy as np
 import pytest
 
 from qpcontact import build_system, colliding, find_contacts, reference_solution
-
+from qpcontact.errors import InvalidArgumentError, UnknownSolverError
 from qpcontact.resolve import metrics
-
-from qpcontact.studies import scenes
-from qpcontact.studies import compare
-from qpcontact.errors import UnknownSolverError
 from qpcontact.solvers import Problem, solve
 from qpcontact.solvers.baselines import bbpgd, conjugate_gradient
-from qpcontact.errors import InvalidArgumentError
 from qpcontact.solvers.linear import solve_min_norm
+from qpcontact.studies import compare, scenes
 
 
 @pytest.fixture(scope="module")

@@ -4,12 +4,11 @@ import itertools
 
 import numpy as np
 import pytest
+from conftest import random_scene
 
 import qpcontact as qc
-from qpcontact.geometry.contacts import candidate_pairs, colliding, narrow_phase
 from qpcontact.errors import InvalidArgumentError
-
-from conftest import random_scene
+from qpcontact.geometry.contacts import candidate_pairs, colliding, narrow_phase
 
 
 def rods(centres, axes, lengths, radii=0.5, **kw):
@@ -17,7 +16,7 @@ def rods(centres, axes, lengths, radii=0.5, **kw):
 
 
 def keyed(contacts):
-    return {(int(a), int(b), round(float(d), 9)) for a, b, d in zip(contacts.cell_a, contacts.cell_b, contacts.separation)}
+    return {(int(a), int(b), round(float(d), 9)) for a, b, d in zip(contacts.cell_a, contacts.cell_b, contacts.separation, strict=True)}
 
 
 @pytest.mark.parametrize("seed", range(5))

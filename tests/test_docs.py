@@ -7,7 +7,6 @@ import numpy as np
 
 import qpcontact as qc
 from qpcontact import cli
-from qpcontact.studies import demo
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import qpcontact as q
-from qpcontact.errors import InvalidArgumentError
 from qpcontact.colony.growth import Colony, divide, grow, volumes
 from qpcontact.colony.snapshots import load_colony, save_colony
+from qpcontact.errors import InvalidArgumentError
 
 
 def one_cell(length=2.0, **extra):

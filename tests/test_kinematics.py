@@ -6,8 +6,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import qpcontact as qc
-from qpcontact.geometry.contacts import Contacts
 from qpcontact.assembly.system import build_system
+from qpcontact.geometry.contacts import Contacts
 
 
 def random_cell(rng):

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from qpcontact import Cells, build_system, colliding, find_contacts
-
 from qpcontact.resolve import metrics
 from qpcontact.solvers.linear import solve_min_norm
 

@@ -5,15 +5,14 @@ finish, and takes only the formulation it solves."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from conftest import random_scene
 
 import qpcontact as qc
-from qpcontact.resolve import metrics
-from qpcontact.studies import scenes
 from qpcontact.errors import InvalidArgumentError, SolverFailedError
-from qpcontact.solvers.mprgp import mprgp
+from qpcontact.resolve import metrics
 from qpcontact.resolve.validation import reference_solution
-
-from conftest import random_scene
+from qpcontact.solvers.mprgp import mprgp
+from qpcontact.studies import scenes
 
 
 def system_of(cells):

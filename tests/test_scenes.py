@@ -5,9 +5,8 @@ import numpy as np
 import pytest
 
 from qpcontact import colliding, find_contacts
-
-from qpcontact.studies import scenes
 from qpcontact.errors import InvalidArgumentError
+from qpcontact.studies import scenes
 
 SMALL = {"two_rods": None, "rod_chain": 8, "rod_across_many": 7, "jammed_packing": 19, "colony_2d": 300, "colony_3d": 300}
 FIELDS = ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta", "growth_momenta")

@@ -3,15 +3,14 @@ contacts are active, what happens in jammed packings, and the documented failure
 
 import numpy as np
 import pytest
+from conftest import random_scene
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 import qpcontact as qc
-from qpcontact.geometry.contacts import relative_normal_velocity
 from qpcontact.errors import InvalidArgumentError, SolverFailedError, SolverNotInstalledError, UnknownSolverError
+from qpcontact.geometry.contacts import relative_normal_velocity
 from qpcontact.solvers.qpsolvers_bridge import KNOWN_BACKENDS
-
-from conftest import random_scene
 
 QP_SOLVERS = [s for s in qc.available_solvers() if s != "linear"]
 FORMULATIONS = ["complementarity", "least_squares"]

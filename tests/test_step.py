@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import qpcontact as q
-from qpcontact.errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
 from qpcontact.colony.growth import Colony, divide, grow
 from qpcontact.colony.step import advance, rotate, step
+from qpcontact.errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
 
 
 def rod_pair_end_to_end(gap=0.0):

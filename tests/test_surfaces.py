@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 import qpcontact as q
-from qpcontact.errors import InvalidArgumentError
 from qpcontact.colony.growth import Colony, grow
 from qpcontact.colony.step import step
+from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry.surfaces import Plane, channel, plane_contacts, substrate
 
 

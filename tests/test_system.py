@@ -3,13 +3,12 @@ model.md's M agrees, planar equals 3D, and the scaled problem is unit-invariant.
 
 import numpy as np
 import pytest
+from conftest import random_scene
 
 import qpcontact as qc
-from qpcontact.geometry.contacts import colliding
-from qpcontact.errors import InvalidArgumentError
 from qpcontact.assembly.system import build_system
-
-from conftest import random_scene
+from qpcontact.errors import InvalidArgumentError
+from qpcontact.geometry.contacts import colliding
 
 
 def with_fixed_and_rigid(cells, seed):

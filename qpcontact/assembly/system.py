@@ -28,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ..errors import InvalidArgumentError
 from ..geometry.cells import Cells, perpendicular_basis
 from ..geometry.contacts import Contacts
-from ..errors import InvalidArgumentError
 
 #: Slots of a cell, in order. Their world-frame directions come from :func:`slot_basis`.
 SLOTS = ("tx", "ty", "tz", "spin", "roll1", "roll2", "growth")

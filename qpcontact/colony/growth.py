@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import Cells, capsule_volume
 from ..errors import InvalidArgumentError
+from ..geometry import Cells, capsule_volume
 from .step import StepResult, rotate, step
 
 
@@ -80,12 +80,12 @@ class Colony:
             raise InvalidArgumentError(f"Colony.next_id: {self.next_id} is not above the largest id {int(self.ids.max())}")
 
     @classmethod
-    def founder(cls, cells: Cells, rates: Any) -> "Colony":
+    def founder(cls, cells: Cells, rates: Any) -> Colony:
         """A colony of founder cells (ids 0..N-1, no parents) growing at ``rates`` [1/time]."""
         rates = np.broadcast_to(np.asarray(rates, dtype=float), (cells.n,))
         return cls(cells, np.arange(cells.n), np.full(cells.n, -1), rates)
 
-    def replace(self, **changes: Any) -> "Colony":
+    def replace(self, **changes: Any) -> Colony:
         """A new, validated Colony with some fields replaced."""
         return dataclasses.replace(self, **changes)
 
@@ -158,14 +158,16 @@ def divide(colony: Colony, division_length: float, rng: np.random.Generator, *,
         out[dividing] = first
         return np.concatenate([out, second])
 
-    halves = {name: getattr(cells, name)[dividing] / 2
-              for name in ("masses", "growth_inertia", "momenta", "angular_momenta", "growth_momenta")}
+    halved: dict[str, Any] = {}  # masses, growth inertias and momenta: each daughter takes half
+    for name in ("masses", "growth_inertia", "momenta", "angular_momenta", "growth_momenta"):
+        half = getattr(cells, name)[dividing] / 2
+        halved[name] = split(getattr(cells, name), half, half)
     daughters = Cells(
         centers=split(cells.centers, cells.centers[dividing] - shift, cells.centers[dividing] + shift),
         axes=split(cells.axes, new_axes[:m], new_axes[m:]),
         lengths=split(cells.lengths, daughter_length, daughter_length),
         radii=split(cells.radii, radii, radii),
-        **{name: split(getattr(cells, name), half, half) for name, half in halves.items()},
+        **halved,
     )
     mean_rate = colony.rates[dividing] if base_rate is None else np.full(m, float(base_rate))
     noise = rng.standard_normal((2, m)) if rate_noise else np.zeros((2, m))

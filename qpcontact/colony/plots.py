@@ -11,8 +11,8 @@ without pyplot, so importing this module leaves the process's matplotlib backend
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
@@ -47,7 +47,7 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     orientation = np.degrees(np.arctan2(cells.axes[:, 1], cells.axes[:, 0])) % 180.0
     # Cells lower down are drawn first, so the top layer of a 3D biofilm is what one sees.
     order = np.argsort(cells.centers[:, 2], kind="stable")
-    polys = PolyCollection(capsule_outlines(cells)[order], array=orientation[order], cmap="twilight",
+    polys = PolyCollection(list(capsule_outlines(cells)[order]), array=orientation[order], cmap="twilight",
                            edgecolors="k", linewidths=0.2)
     polys.set_clim(0.0, 180.0)
     ax.add_collection(polys)

@@ -33,13 +33,13 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import Cells, capsule_volume
 from ..errors import InvalidArgumentError, QPContactError, SolverFailedError
+from ..geometry import Cells, capsule_volume
+from ..geometry.surfaces import substrate
+from ..solvers import FORMS, QP_FORMULATIONS, available_solvers
 from .growth import Colony, divide, expansion_time_step, grow
 from .snapshots import load_colony, save_colony
 from .step import largest_overlap
-from ..geometry.surfaces import substrate
-from ..solvers import FORMS, QP_FORMULATIONS, available_solvers
 
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
                   "step_seconds", "penetration", "complementarity", "rejected")
@@ -232,7 +232,7 @@ def write_history(path: Path, history: dict[str, list[float]]) -> Path:
     with open(path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(HISTORY_FIELDS)
-        writer.writerows(zip(*(history[name] for name in HISTORY_FIELDS)))
+        writer.writerows(zip(*(history[name] for name in HISTORY_FIELDS), strict=True))
     return path
 
 

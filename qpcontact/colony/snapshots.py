@@ -34,8 +34,9 @@ Read one with plain NumPy (``np.load(path)["centers"]``) or with :func:`load_col
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -49,12 +50,12 @@ CELL_FIELDS = tuple(f.name for f in dataclasses.fields(Cells))
 COLONY_FIELDS = ("ids", "parent_ids", "rates", "owed")
 
 
-def cell_arrays(cells: Cells) -> dict[str, np.ndarray]:
+def cell_arrays(cells: Cells) -> dict[str, Any]:
     """The arrays of :class:`~qpcontact.Cells`, by field name (:data:`CELL_FIELDS`)."""
     return {name: getattr(cells, name) for name in CELL_FIELDS}
 
 
-def cells_from_arrays(data: Mapping[str, np.ndarray]) -> Cells:
+def cells_from_arrays(data: Mapping[str, Any]) -> Cells:
     """:class:`~qpcontact.Cells` from arrays named as its fields (e.g. an opened NPZ file)."""
     return Cells(**{name: data[name] for name in CELL_FIELDS})
 

@@ -26,17 +26,18 @@ unchanged (the caller still holds the old ``cells``).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
+from ..errors import InvalidArgumentError, InvalidCellsError
 from ..geometry.cells import Cells
 from ..geometry.contacts import Contacts, concatenate, find_contacts, required_velocity_change
-from ..errors import InvalidArgumentError, InvalidCellsError
+from ..geometry.surfaces import plane_contacts
 from ..resolve import Result, resolve
 from ..solvers import get_solver
-from ..geometry.surfaces import plane_contacts
 
 DYNAMICS = ("overdamped", "inertial")
 #: Contacts separating faster than this many times the largest collision are left out

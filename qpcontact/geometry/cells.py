@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from ..errors import InvalidCellsError
 
@@ -97,6 +98,12 @@ class Cells:
     growth_momenta: Any = 0.0
     normalize_axes: dataclasses.InitVar[bool] = False
 
+    if TYPE_CHECKING:  # the constructor takes array-likes (scalars broadcast); the attributes are arrays
+        def __init__(self, centers: ArrayLike, axes: ArrayLike, lengths: ArrayLike, radii: ArrayLike,
+                     masses: ArrayLike = 1.0, growth_inertia: ArrayLike = np.inf, momenta: ArrayLike = 0.0,
+                     angular_momenta: ArrayLike = 0.0, growth_momenta: ArrayLike = 0.0,
+                     normalize_axes: bool = False) -> None: ...
+
     def __post_init__(self, normalize_axes: bool) -> None:
         centers = np.asarray(self.centers, dtype=float) if not isinstance(self.centers, np.ndarray) else self.centers
         if centers.ndim != 2 or centers.shape[1] != 3:
@@ -150,11 +157,11 @@ class Cells:
     def __len__(self) -> int:
         return self.n
 
-    def replace(self, **changes: Any) -> "Cells":
+    def replace(self, **changes: Any) -> Cells:
         """A new, validated Cells with some arrays replaced (``dataclasses.replace``)."""
         return dataclasses.replace(self, **changes)
 
-    def subset(self, index: Any) -> "Cells":
+    def subset(self, index: Any) -> Cells:
         """The cells selected by ``index`` (boolean mask or integer indices), in that order."""
         return Cells(**{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)})
 
@@ -214,7 +221,7 @@ class Cells:
         """(N, 7) stacked ``(p, L, g)`` in the column order of ``Result.impulses``."""
         return np.hstack([self.momenta, self.angular_momenta, self.growth_momenta[:, None]])
 
-    def with_impulses(self, impulses: np.ndarray) -> "Cells":
+    def with_impulses(self, impulses: np.ndarray) -> Cells:
         """A new Cells whose momenta are these plus the (N, 7) impulses ``(Δp, ΔL, Δg)``."""
         impulses = np.asarray(impulses, dtype=float)
         if impulses.shape != (self.n, 7):

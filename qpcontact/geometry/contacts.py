@@ -23,8 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .cells import Cells, perpendicular_basis
 from ..errors import InvalidArgumentError
+from .cells import Cells, perpendicular_basis
 
 #: Pairs whose axes make an angle with sine below this get two contacts (ends of the overlap).
 PARALLEL_SINE = 1e-3
@@ -59,12 +59,12 @@ class Contacts:
     def __len__(self) -> int:
         return int(self.cell_a.shape[0])
 
-    def subset(self, index: np.ndarray) -> "Contacts":
+    def subset(self, index: np.ndarray) -> Contacts:
         """The contacts selected by a boolean mask or integer indices."""
         return Contacts(**{f.name: getattr(self, f.name)[index] for f in dataclasses.fields(self)})
 
     @classmethod
-    def empty(cls) -> "Contacts":
+    def empty(cls) -> Contacts:
         z1, z3 = np.zeros(0), np.zeros((0, 3))
         zi = np.zeros(0, dtype=np.intp)
         return cls(zi, zi.copy(), z3, z3, z3, z1, z1, z1, z1)

@@ -10,14 +10,14 @@ zero velocity, infinite mass) and go into the same system as cell–cell contact
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
+from ..errors import InvalidArgumentError
 from .cells import Cells
 from .contacts import Contacts, concatenate, relative_normal_velocity
-from ..errors import InvalidArgumentError
 
 
 @dataclass(frozen=True)

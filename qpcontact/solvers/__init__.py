@@ -29,10 +29,13 @@ and add ``from . import mysolver`` below. :func:`qpcontact.resolve` (``solver="m
 example.
 """
 
+# The order of these imports is the order of the listings (available_solvers, demo, compare).
+# isort: off
 from . import linear  # noqa: F401  (registers "linear")
 from . import baselines  # noqa: F401  (registers "cg", "cg_euclidean", "bbpgd")
 from . import mprgp  # noqa: F401  (registers "mprgp")
 from . import qpsolvers_bridge  # noqa: F401  (registers every qpsolvers backend)
+# isort: on
 from .blocks import BLOCK_ROWS, independent_blocks
 from .linear import LinearSolution, solve_min_norm
 from .registry import (

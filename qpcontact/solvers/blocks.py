@@ -33,4 +33,4 @@ def independent_blocks(matrix: sp.spmatrix, min_rows: int = 0) -> list[tuple[np.
     n_blocks = int(block.max()) + 1
     rows = np.split(np.argsort(row_block, kind="stable"), np.cumsum(np.bincount(row_block, minlength=n_blocks))[:-1])
     cols = np.split(np.argsort(col_block, kind="stable"), np.cumsum(np.bincount(col_block, minlength=n_blocks))[:-1])
-    return [(r, c) for r, c in zip(rows, cols) if r.size]
+    return [(r, c) for r, c in zip(rows, cols, strict=True) if r.size]

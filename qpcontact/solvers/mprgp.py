@@ -38,7 +38,8 @@ block, warm start (``λ̃``) and time limit honoured; settings ``max_iterations`
 from __future__ import annotations
 
 import time
-from typing import Any, Callable, Mapping
+from collections.abc import Callable, Mapping
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp

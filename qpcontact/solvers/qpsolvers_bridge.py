@@ -31,8 +31,9 @@ import os
 import sys
 import time
 import warnings
+from collections.abc import Iterator, Mapping
 from functools import partial
-from typing import Any, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 import qpsolvers
@@ -156,6 +157,11 @@ def _quiet_stdout() -> Iterator[None]:
         os.close(saved)
 
 
+def _dense(matrix: Any) -> Any:
+    """A sparse matrix as a dense array (other entries of a problem as they are)."""
+    return matrix.toarray() if sp.issparse(matrix) else matrix
+
+
 def _dense_only(backend: str) -> bool:
     return backend in qpsolvers.dense_solvers and backend not in qpsolvers.sparse_solvers
 
@@ -169,7 +175,7 @@ def solve_backend(backend: str, problem: Problem, formulation: str, form: str, *
     t0 = time.perf_counter()
     qp = qp_problem(B, rhs, formulation, form, problem.regularization)
     if _dense_only(backend):
-        qp = qpsolvers.Problem(*(m.toarray() if sp.issparse(m) else m for m in qp.unpack()))
+        qp = qpsolvers.Problem(*(_dense(m) for m in qp.unpack()))
     t1 = time.perf_counter()
     try:
         with warnings.catch_warnings(), (_quiet_stdout() if backend == "osqp" else contextlib.nullcontext()):

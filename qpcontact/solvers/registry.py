@@ -26,8 +26,9 @@ through ``Ã = B̃B̃ᵀ``) and ``"normal_equations"`` (``B̃ᵀB̃ỹ = B̃ᵀb
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable, Mapping, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 import scipy.sparse as sp
@@ -376,7 +377,9 @@ def solve_by_blocks(
         out.extras["blocks"] = 1
         return out
     y, lam = np.zeros(n), np.zeros(k)
-    has_lam, statuses, iterations = True, [], []
+    has_lam = True
+    statuses: list[str] = []
+    iterations: list[int] = []
     setup, solve_seconds = time.perf_counter() - t0, 0.0
     limit = time_limit
     for rows, cols in parts:

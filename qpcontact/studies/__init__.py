@@ -13,8 +13,10 @@ Nothing in the other wings imports from here.
   whole colony runs) and :mod:`.colony_10k` (steps of a 10⁴-cell colony).
 """
 
-from . import scenes  # noqa: I001  (the registry first; the catalogue registers into it)
+# isort: off
+from . import scenes  # the registry first: the catalogue registers into it
 from . import catalogue
+# isort: on
 from .catalogue import CATALOGUE
 from .harness import Prepared, guarded, prepare, write_csv
 from .scenes import SCENES, Scene, make_scene, register_scene

@@ -44,12 +44,14 @@ import resource
 import subprocess
 import sys
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
-from ..assembly import build_system
+from ..assembly import ContactSystem, build_system
 from ..colony.snapshots import load_cells, save_cells
 from ..geometry import Cells, colliding, find_contacts
 from ..resolve import active_set_polish, metrics, reference_solution, solve_system
@@ -113,6 +115,13 @@ def _detect(cells: Cells, planar: bool):
     return colliding(find_contacts(cells, planar=planar))
 
 
+def _measures(cells: Cells, system: ContactSystem, y: np.ndarray, lam: np.ndarray) -> tuple[Any, ...]:
+    """The error measures of one answer (what *check* times)."""
+    return (metrics.penetration(system, y), metrics.complementarity_residual(system, y, lam),
+            metrics.multiplier_consistency(system, y, lam),
+            metrics.physics(cells, system, system.to_impulses(y), system.to_contact_impulses(lam)))
+
+
 def run_snapshot(dimensions: int, n_cells: int, *, seed: int, repeats: int, solvers: list[str], tolerance: float,
                  time_limit: float | None, cache_dir: Path | None) -> dict[str, Any]:
     """Time and verify one step on one snapshot; returns a JSON-ready record."""
@@ -138,9 +147,7 @@ def run_snapshot(dimensions: int, n_cells: int, *, seed: int, repeats: int, solv
                    form=info["form"], message=info["message"])
         if not get_solver(name).plain and y is not None and lam is not None:
             guesses[spec] = lam
-            (_, t_check) = _timed(lambda: (metrics.penetration(system, y), metrics.complementarity_residual(system, y, lam),
-                                           metrics.multiplier_consistency(system, y, lam),
-                                           metrics.physics(cells, system, system.to_impulses(y), system.to_contact_impulses(lam))), 1)
+            (_, t_check) = _timed(partial(_measures, cells, system, y, lam), 1)
             row["check"] = _stats(t_check)
         row["solve"] = _stats(times)
         answers[spec] = y
@@ -344,14 +351,14 @@ def plot(records: list[dict[str, Any]], path: Path) -> None:
     all_dimensions = sorted({r["dimensions"] for r in records})
     fig = Figure(figsize=(6 * len(all_dimensions), 4.5))
     axes = fig.subplots(1, len(all_dimensions), squeeze=False)
-    for ax, dimensions in zip(axes[0], all_dimensions):
+    for ax, dimensions in zip(axes[0], all_dimensions, strict=True):
         rs = [r for r in records if r["dimensions"] == dimensions]
         n = [r["cells"] for r in rs]
         ax.loglog(n, [r["detect"]["median"] for r in rs], "k--o", label="detect")
         ax.loglog(n, [r["assemble"]["median"] for r in rs], "k:s", label="assemble")
         for spec in dict.fromkeys(spec for r in rs for spec in r["solvers"]):
             done = [(r["cells"], r["solvers"][spec]["solve"]["median"]) for r in rs if spec in r["solvers"]]
-            ax.loglog(*zip(*done), "-o", label=spec)
+            ax.loglog(*zip(*done, strict=True), "-o", label=spec)
         ax.loglog(n, [n_i * 1e-5 for n_i in n], color="0.8", lw=4, zorder=0, label="∝ cells")
         ax.set(xlabel="cells", ylabel="seconds (median)", title=f"{dimensions}D colony")
         ax.grid(True, which="both", alpha=0.3)
@@ -483,7 +490,7 @@ def main(argv: list[str] | None = None) -> int:
             records.append(previous)
             print(f"bench: {dimensions}D, {n} cells done in {time.perf_counter() - t0:.1f} s", file=sys.stderr, flush=True)
     meta = {
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": machine_description(),
         "command": "qpcontact bench " + " ".join(argv if argv is not None else sys.argv[1:]),
         "repeats": args.repeats,

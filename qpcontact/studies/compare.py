@@ -40,7 +40,7 @@ import multiprocessing
 import platform
 import time
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -199,11 +199,11 @@ def measure(prepared: Prepared, method: Method, tolerance: float, y: np.ndarray 
     reference = prepared.references[method.formulation]
     impulses = system.to_impulses(y)
     physics = metrics.physics(prepared.cells, system, impulses, None if lam is None else system.to_contact_impulses(lam))
-    comp = method.formulation == "complementarity" and lam is not None
+    comp = lam if method.formulation == "complementarity" else None  # contact impulses to measure, if any
     return {
         "penetration": metrics.penetration(system, y),
-        "complementarity": metrics.complementarity_residual(system, y, lam) if comp else nan,
-        "duality_gap": metrics.duality_gap(system, y, lam) if comp else nan,
+        "complementarity": nan if comp is None else metrics.complementarity_residual(system, y, comp),
+        "duality_gap": nan if comp is None else metrics.duality_gap(system, y, comp),
         "distance": metrics.distance(y, reference),
         "objective_gap": metrics.objective_gap(system, method.formulation, y, reference),
         "distance_complementarity": metrics.distance(y, prepared.references["complementarity"]),
@@ -239,7 +239,8 @@ def run_one(prepared: Prepared, method: Method, tolerance: float, *, time_limit:
     start = time.perf_counter()
     outcome, payload = harness.guarded(timed_runs, (system, method, tolerance, time_limit, repeats, warm), hard_timeout,
                                        preload=("qpcontact.studies.compare",))
-    y = lam = None
+    y: Any = None
+    lam: Any = None
     if outcome == "ok":
         y, lam = payload["y"], payload["lam"]
         row.update(repeats=payload["repeats"], setup_s=payload["setup"], solve_s=payload["solve"],
@@ -255,7 +256,7 @@ def run_one(prepared: Prepared, method: Method, tolerance: float, *, time_limit:
         row.update(repeats=0, setup_s=math.nan, solve_s=math.nan, total_s=elapsed if outcome == "timeout" else math.nan,
                    status=outcome, converged=False, iterations=None,
                    message=(f"killed after {hard_timeout:.0f} s" if outcome == "timeout" else str(payload))[:300])
-    if y is not None and np.shape(y) != (n,) or lam is not None and np.shape(lam) != (k,):
+    if (y is not None and np.shape(y) != (n,)) or (lam is not None and np.shape(lam) != (k,)):
         row.update(converged=False, message=f"{method.solver} returned ỹ of shape {np.shape(y)}, λ̃ of shape "
                    f"{None if lam is None else np.shape(lam)} for a system of shape {system.shape}; "
                    f"status {row['status']}; {row['message']}"[:300])
@@ -357,16 +358,19 @@ def form_table(rows: list[dict[str, Any]]) -> str:
              "| median distance primal/contact |", "|---|---|---|---|---|---|"]
     index = {(r["scene"], r["tolerance"], r["solver"], r["formulation"], r["form"]): r for r in rows}
     for solver, formulation in dict.fromkeys((r["solver"], r["formulation"]) for r in rows if r["form"] in QP_FORMS):
-        pairs = [(index.get((sc, t, solver, formulation, "primal")), index.get((sc, t, solver, formulation, "contact")))
-                 for sc, t in dict.fromkeys((r["scene"], r["tolerance"]) for r in rows)]
-        pairs = [(p, c) for p, c in pairs if p is not None and c is not None]
+        pairs: list[tuple[dict[str, Any], dict[str, Any]]] = []
+        for sc, t in dict.fromkeys((r["scene"], r["tolerance"]) for r in rows):
+            primal, contact = index.get((sc, t, solver, formulation, "primal")), index.get((sc, t, solver, formulation, "contact"))
+            if primal is not None and contact is not None:
+                pairs.append((primal, contact))
         if not pairs:
             continue
         both = [(p, c) for p, c in pairs if p["success"] and c["success"]]
         t_ratio = [p["total_s"] / c["total_s"] for p, c in both if c["total_s"] > 0]
         d_ratio = [max(p["distance"], 1e-16) / max(c["distance"], 1e-16) for p, c in both]
-        rate = lambda form: np.mean([(p if form == "primal" else c)["success"] for p, c in pairs])  # noqa: E731
-        lines.append(f"| {solver} | {formulation} | {100 * rate('primal'):.0f} % | {100 * rate('contact'):.0f} % "
+        primal_rate = np.mean([p["success"] for p, _ in pairs])
+        contact_rate = np.mean([c["success"] for _, c in pairs])
+        lines.append(f"| {solver} | {formulation} | {100 * primal_rate:.0f} % | {100 * contact_rate:.0f} % "
                      f"| {np.median(t_ratio) if t_ratio else math.nan:.2g} | {np.median(d_ratio) if d_ratio else math.nan:.2g} |")
     return "\n".join(lines)
 
@@ -405,7 +409,7 @@ def plot(rows: list[dict[str, Any]], path: Path) -> None:
                     continue
                 solver, form = sweep[0]["solver"], sweep[0]["form"]
                 color, marker = SOLVER_STYLE.get(solver, ("tab:cyan", "h"))
-                t, d, ok = map(np.array, zip(*pts))
+                t, d, ok = map(np.array, zip(*pts, strict=True))
                 ax.plot(t, d, color=color, lw=0.8, alpha=0.6, ls="--" if form == "contact" else "-")
                 ax.scatter(t[ok], d[ok], color=color, marker=marker, s=22, zorder=3)
                 ax.scatter(t[~ok], d[~ok], facecolors="none", edgecolors=color, marker="o", s=40, zorder=3)
@@ -441,7 +445,7 @@ def plot_scenes(cases: list[SceneCase], path: Path, max_cells: int = 1000) -> No
     axes = fig.subplots(n_rows, columns, squeeze=False)
     for ax in axes.flat[len(shown):]:
         ax.set_visible(False)
-    for ax, case in zip(axes.flat, shown):
+    for ax, case in zip(axes.flat, shown, strict=False):  # the grid may have more panels than scenes
         cells = make_scene(case.generator, case.n_cells)
         half = 0.5 * cells.lengths[:, None] * cells.axes
         ends = np.stack([cells.centers - half, cells.centers + half], axis=1)[:, :, :2]
@@ -461,7 +465,7 @@ def plot_scenes(cases: list[SceneCase], path: Path, max_cells: int = 1000) -> No
         order = np.argsort(z, kind="stable")
         rods = order[cells.lengths[order] > 0]
         spheres = order[cells.lengths[order] == 0]  # zero-length segments are not drawn: discs
-        ax.add_collection(LineCollection(ends[rods], colors=colour[rods], capstyle="round",
+        ax.add_collection(LineCollection(list(ends[rods]), colors=colour[rods], capstyle="round",
                                          linewidths=2 * cells.radii[rods] * points_per_unit))
         ax.scatter(cells.centers[spheres, 0], cells.centers[spheres, 1], c=colour[spheres],
                    s=(2 * cells.radii[spheres] * points_per_unit) ** 2, linewidths=0)
@@ -543,7 +547,7 @@ def main(argv: list[str] | None = None) -> int:
     cases = _select_scenes(args.scenes, args.quick)
     methods = all_methods([s.strip() for s in args.solvers.split(",")] if args.solvers else None)
     args.out.mkdir(parents=True, exist_ok=True)
-    started = datetime.now(timezone.utc)
+    started = datetime.now(UTC)
     rows: list[dict[str, Any]] = []
     scene_lines = []
     warm = warm_up_system()
@@ -551,6 +555,7 @@ def main(argv: list[str] | None = None) -> int:
         for case in cases:
             bar.set_description(f"{case.name}: references")
             prepared = prepare(case)
+            assert prepared.system is not None, f"{case.name}: nothing collides"
             k, n = prepared.system.shape
             scene_lines.append(f"| {case.name} | {prepared.cells.n} | {k} | {n} | {'yes' if prepared.system.planar else 'no'} "
                                f"| {'yes' if prepared.all_active else 'no'} | {prepared.reference_residual:.1e} "
@@ -565,7 +570,7 @@ def main(argv: list[str] | None = None) -> int:
                     rows.append(run_one(prepared, method, tolerance, time_limit=args.time_limit, repeats=repeats,
                                         warm=warm))
                     bar.update()
-    finished = datetime.now(timezone.utc)
+    finished = datetime.now(UTC)
     write_csv(rows, args.out / "solvers.csv")
     plot(rows, args.out / "solvers.png")
     plot_scenes(cases, args.out / "solvers_scenes.png")

@@ -28,7 +28,7 @@ def run(n_cells: int, seed: int, dimensions: int, tolerance: float) -> tuple[str
     active, b = colliding(find_contacts(cells))
     system = build_system(cells, active, b)
     references = {f: reference_solution(system, f) for f in FORMULATIONS}
-    rows = []
+    rows: list[tuple[str, ...]] = []
     for solver in available_solvers():
         for formulation in get_solver(solver).formulations:
             start = time.perf_counter()

@@ -32,8 +32,9 @@ Hand-made cases: :func:`two_rods`, :func:`rod_chain`, :func:`rod_across_many`,
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -439,10 +440,11 @@ def jammed_packing(n_cells: int = 61, seed: int = 0) -> Cells:
     pitch = 2 * RADIUS * 0.95
     # Hexagonal rings needed for n_cells (1 + 3r(r + 1) >= n), plus one ring for the wall.
     rings = int(np.ceil((-3 + np.sqrt(9 + 12 * (n_cells - 1))) / 6)) + 1
-    i, j = np.meshgrid(np.arange(-rings, rings + 1), np.arange(-rings, rings + 1), indexing="ij")
-    i, j = i.ravel(), j.ravel()
+    grid_i, grid_j = np.meshgrid(np.arange(-rings, rings + 1), np.arange(-rings, rings + 1), indexing="ij")
+    i, j = grid_i.ravel(), grid_j.ravel()
     hex_dist = np.maximum(np.abs(i), np.maximum(np.abs(j), np.abs(i + j)))
-    i, j, hex_dist = i[hex_dist <= rings], j[hex_dist <= rings], hex_dist[hex_dist <= rings]
+    inside_rings = hex_dist <= rings
+    i, j, hex_dist = i[inside_rings], j[inside_rings], hex_dist[inside_rings]
     pos = np.column_stack([pitch * (i + 0.5 * j), pitch * (np.sqrt(3) / 2) * j, np.zeros(i.size)])
     order = np.lexsort((np.arctan2(pos[:, 1], pos[:, 0]), np.linalg.norm(pos, axis=1)))
     inside = order[:n_cells]

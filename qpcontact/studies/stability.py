@@ -44,7 +44,7 @@ import multiprocessing
 import platform
 import time
 import traceback
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -105,6 +105,7 @@ def check(prep: Prepared, formulation: str, impulses: np.ndarray, contact_impuls
     """Every measure of a converged answer (on the case's scaled system) and the checks that
     failed (``failed``: list of names)."""
     system = prep.system
+    assert system is not None, "only cases with colliding contacts have answers to check"
     y = system.from_impulses(impulses)
     measures: dict[str, Any] = {"penetration": metrics.penetration(system, y),
                                 "distance": metrics.distance(y, prep.references[formulation])}
@@ -140,11 +141,11 @@ def run_one(prep: Prepared, solver: str, formulation: str, form: str, scale: boo
     times are the medians."""
     row: dict[str, Any] = {"case": prep.case.name, "family": prep.case.family, "solver": solver,
                            "formulation": formulation, "form": form, "scale": scale}
-    kwargs = {"formulation": formulation, "form": form}
+    kwargs: dict[str, Any] = {"formulation": formulation, "form": form, **prep.case.options}
     t0 = time.perf_counter()
     try:
         result = resolve(prep.cells, solver=solver, contacts=prep.contacts, tolerance=TOLERANCE, time_limit=time_limit,
-                         scale=scale, **kwargs, **prep.case.options)
+                         scale=scale, **kwargs)
     except QPContactError as exc:
         return {**row, "outcome": "error", "seconds": time.perf_counter() - t0,
                 "message": f"{type(exc).__name__}: {exc}"}
@@ -154,7 +155,7 @@ def run_one(prep: Prepared, solver: str, formulation: str, form: str, scale: boo
     totals, solves = [result.times["total"]], [result.times["solve"]]
     while result.converged and totals[0] < REPEAT_BELOW and len(totals) < repeats:
         again = resolve(prep.cells, solver=solver, contacts=prep.contacts, tolerance=TOLERANCE, time_limit=time_limit,
-                        scale=scale, **kwargs, **prep.case.options)
+                        scale=scale, **kwargs)
         totals.append(again.times["total"])
         solves.append(again.times["solve"])
     row.update(seconds=float(np.median(totals)), solve_seconds=float(np.median(solves)), repeats=len(totals),
@@ -342,7 +343,7 @@ def main(argv: list[str] | None = None) -> int:
     scalings = [s == "on" for s in args.scaling.split(",")]
     preps: dict[str, Prepared] = {}
     rows: list[dict[str, Any]] = []
-    started = datetime.now(timezone.utc)
+    started = datetime.now(UTC)
     with tqdm(total=len(cases) * len(triples) * len(scalings), unit="run") as bar:
         for case in cases:
             bar.set_description(case.name)
