@@ -32,7 +32,7 @@ from ..errors import InvalidArgumentError
 from ..geometry.cells import Cells, perpendicular_basis
 from ..geometry.contacts import Contacts
 
-#: Slots of a cell, in order. Their world-frame directions come from :func:`slot_basis`.
+#: Slots of a cell, in order. Their world-frame directions come from :func:`slot_directions`.
 SLOTS = ("tx", "ty", "tz", "spin", "roll1", "roll2", "growth")
 #: Axes and normals with |z| below this count as lying in the xy-plane.
 PLANAR_TOLERANCE = 1e-12
@@ -52,11 +52,6 @@ def slot_directions(cells: Cells, cell: np.ndarray, slot: np.ndarray) -> np.ndar
         e1, e2 = perpendicular_basis(axes)
         out[rotation, 3:6] = np.stack([axes, e1, e2])[slot[rotation] - 3, np.arange(rotation.size)]
     return out
-
-
-def slot_basis(cells: Cells, index: np.ndarray) -> np.ndarray:
-    """(len(index), 7, 7): row j is slot j's direction in the world (Δp, ΔL, Δg) space."""
-    return np.stack([slot_directions(cells, index, np.full(index.size, j)) for j in range(7)], axis=1)
 
 
 def slot_inverse_mass(cells: Cells, index: np.ndarray) -> np.ndarray:

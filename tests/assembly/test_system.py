@@ -3,12 +3,12 @@ model.md's M agrees, planar equals 3D, and the scaled problem is unit-invariant.
 
 import numpy as np
 import pytest
-from conftest import random_scene
 
 import qpcontact as qc
 from qpcontact.assembly.system import build_system
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry.contacts import colliding
+from tests.helpers import random_scene, world_operators
 
 
 def with_fixed_and_rigid(cells, seed):
@@ -19,37 +19,19 @@ def with_fixed_and_rigid(cells, seed):
 
 
 def dense_reference(cells, contacts, b):
-    """Minimum-W-norm solution built straight from model.md's formulas (world frame, dense):
-    J rows ``[nᵀ, (r × n)ᵀ, (s/l)(â·n)]`` per side, ``A = J W Jᵀ``, ``λ = A⁺b``, ``x = Jᵀλ`` on
-    the movable degrees of freedom."""
-    n_cells, k = cells.n, len(contacts)
-    J = np.zeros((k, 7 * n_cells))
-    for side, sign in (("a", 1.0), ("b", -1.0)):
-        cell = getattr(contacts, f"cell_{side}")
-        r = getattr(contacts, f"offset_{side}")
-        stretch = getattr(contacts, f"stretch_{side}")
-        for row in range(k):
-            c = cell[row]
-            if c < 0:
-                continue
-            nrm = contacts.normal[row]
-            J[row, 7 * c:7 * c + 3] += sign * nrm
-            J[row, 7 * c + 3:7 * c + 6] += sign * np.cross(r[row], nrm)
-            J[row, 7 * c + 6] += sign * stretch[row] * (cells.axes[c] @ nrm)
-    W = np.zeros((7 * n_cells, 7 * n_cells))
-    for c in range(n_cells):
-        W[7 * c:7 * c + 3, 7 * c:7 * c + 3] = np.eye(3) / cells.masses[c]
-        W[7 * c + 3:7 * c + 6, 7 * c + 3:7 * c + 6] = cells.subset([c]).apply_inverse_inertia(np.eye(3))
-        W[7 * c + 6, 7 * c + 6] = 1.0 / cells.growth_inertia[c] if np.isfinite(cells.masses[c]) else 0.0
+    """Minimum-W-norm solution built straight from model.md's formulas (world frame, dense,
+    :func:`tests.helpers.world_operators`): ``A = J W Jᵀ``, ``λ = A⁺b``, ``x = Jᵀλ`` on the
+    movable degrees of freedom."""
+    J, W = world_operators(cells, contacts)
     lam = np.linalg.pinv(J @ W @ J.T, rcond=1e-12) @ b
     x = J.T @ lam
     x[np.diag(W) == 0] = 0.0  # fixed cells and non-growing lengths take no impulse
-    return x.reshape(n_cells, 7), lam
+    return x.reshape(cells.n, 7), lam
 
 
 @pytest.mark.parametrize("seed", range(6))
 def test_reduced_full_and_dense_agree(seed):
-    cells = with_fixed_and_rigid(random_scene(seed, n=25), seed)
+    cells = with_fixed_and_rigid(random_scene(seed, n_cells=25), seed)
     reduced = qc.resolve(cells, solver="linear")
     full = qc.resolve(cells, solver="linear", reduce=False)
     assert len(reduced.contacts) > 5
@@ -65,7 +47,7 @@ def test_reduced_full_and_dense_agree(seed):
 
 @pytest.mark.parametrize("solver", ["clarabel", "osqp"])
 def test_reduction_does_not_change_the_qp_answer(solver):
-    cells = with_fixed_and_rigid(random_scene(1, n=25), 1)
+    cells = with_fixed_and_rigid(random_scene(1, n_cells=25), 1)
     a = qc.resolve(cells, solver=solver, tolerance=1e-8)
     b = qc.resolve(cells, solver=solver, tolerance=1e-8, reduce=False)
     assert np.allclose(a.impulses, b.impulses, atol=1e-4 * np.max(np.abs(b.impulses)))
@@ -88,7 +70,7 @@ def test_unknown_counts_follow_the_scene():
 @pytest.mark.parametrize("solver", ["linear", "clarabel", "osqp"])
 @pytest.mark.parametrize("seed", range(3))
 def test_planar_scene_solved_as_planar_and_as_3d_gives_the_same_impulses(solver, seed):
-    cells = random_scene(seed, n=40, planar=True)
+    cells = random_scene(seed, n_cells=40, planar=True)
     planar = qc.resolve(cells, solver=solver, tolerance=1e-8)
     spatial = qc.resolve(cells, solver=solver, tolerance=1e-8, planar=False)
     assert planar.planar and not spatial.planar
@@ -100,7 +82,7 @@ def test_planar_scene_solved_as_planar_and_as_3d_gives_the_same_impulses(solver,
 
 
 def test_forcing_planar_on_a_3d_scene_raises():
-    cells = random_scene(0, n=20)
+    cells = random_scene(0, n_cells=20)
     active, b = colliding(qc.find_contacts(cells))
     with pytest.raises(InvalidArgumentError, match="planar=True"):
         build_system(cells, active, b, planar=True)
@@ -110,8 +92,8 @@ def test_forcing_planar_on_a_3d_scene_raises():
 @pytest.mark.parametrize("formulation", ["complementarity", "least_squares"])
 def test_results_are_unit_invariant(solver, formulation):
     """The same scene in µm/pg/s and in m/kg/s: the same dimensionless problem and answer."""
-    micro = random_scene(4, n=30, unit_length=1.0, unit_mass=1.0)  # µm, pg
-    si = random_scene(4, n=30, unit_length=1e-6, unit_mass=1e-15)  # m, kg
+    micro = random_scene(4, n_cells=30, unit_length=1.0, unit_mass=1.0)  # µm, pg
+    si = random_scene(4, n_cells=30, unit_length=1e-6, unit_mass=1e-15)  # m, kg
     a = qc.resolve(micro, solver=solver, formulation=formulation, tolerance=1e-7)
     b = qc.resolve(si, solver=solver, formulation=formulation, tolerance=1e-7)
     assert np.allclose(a.system.matrix.toarray(), b.system.matrix.toarray(), rtol=1e-9, atol=1e-12)

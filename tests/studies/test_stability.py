@@ -1,4 +1,4 @@
-"""Stiff and extreme cases (qpcontact.catalogue): finiteness, the invariants of model.md, unit
+"""Stiff and extreme cases (qpcontact.studies.catalogue): finiteness, the invariants of model.md, unit
 invariance, and clear errors. The 10⁴-rod chain and the 1000-neighbour hub run at reduced size
 here (full size in ``qpcontact stability``)."""
 

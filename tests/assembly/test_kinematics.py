@@ -1,5 +1,6 @@
-"""The row nᵀM_r against finite differences of a moving, growing body point (model.md), and the
-seed's errata shown to be errors."""
+"""The row nᵀM_r against finite differences of a moving, growing body point (model.md): of the
+motion written out here with scipy's rotations, and of the motion the package's own integrator
+makes; and the seed's errata shown to be errors by the same finite differences."""
 
 import numpy as np
 import pytest
@@ -7,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 import qpcontact as qc
 from qpcontact.assembly.system import build_system
+from qpcontact.colony import advance, rotate
 from qpcontact.geometry.contacts import Contacts
 
 
@@ -71,37 +73,6 @@ def test_row_matches_finite_differences(seed, on_cap):
     assert system_row(cell, sigma, e, n) == pytest.approx(expected, rel=1e-7, abs=1e-8)
 
 
-def seed_point_velocity(cell, r, *, sign=+1.0, growth_factor=0.5):
-    """The seed's point velocity: ``v + sign·[r]× I⁻¹ L + growth_factor (â·r)/l · g/G â``."""
-    a = cell.axes[0]
-    w = cell.angular_velocities[0]
-    return cell.velocities[0] + sign * np.cross(r, w) + growth_factor * (a @ r) / cell.lengths[0] * cell.growth_rates[0] * a
-
-
-def test_seed_sign_of_the_angular_block_is_wrong():
-    """Erratum 1: the seed's M_r has +[r]×I⁻¹; only −[r]×I⁻¹ (= ω × r) matches the motion."""
-    rng = np.random.default_rng(7)
-    cell = random_cell(rng).replace(growth_momenta=[0.0])
-    sigma, e = sample_point(rng, cell, False)
-    r = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
-    fd = fd_velocity(cell, sigma, e)
-    assert np.allclose(seed_point_velocity(cell, r, sign=-1.0), fd, atol=1e-7)
-    assert not np.allclose(seed_point_velocity(cell, r, sign=+1.0), fd, atol=1e-3)
-
-
-def test_seed_growth_factor_one_half_is_wrong_for_full_length():
-    """Erratum 2: with l the full length, a body point moves by (s/l) l̇ â, not ½ (s/l) l̇ â."""
-    rng = np.random.default_rng(3)
-    cell = random_cell(rng).replace(momenta=np.zeros((1, 3)), angular_momenta=np.zeros((1, 3)))
-    e = np.cross(cell.axes[0], [0.0, 0.0, 1.0])
-    e /= np.linalg.norm(e)
-    sigma = 0.4
-    r = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
-    fd = fd_velocity(cell, sigma, e)
-    assert np.allclose(seed_point_velocity(cell, r, sign=-1.0, growth_factor=1.0), fd, atol=1e-7)
-    assert not np.allclose(seed_point_velocity(cell, r, sign=-1.0, growth_factor=0.5), fd, atol=1e-3)
-
-
 def test_seed_closed_form_normal_equation_block_is_not_MtM():
     """Erratum 5: each contact adds the rank-one (nᵀM_s)ᵀ(nᵀM_r) to MᵀM; the seed's printed
     diagonal 1/(M₁M₂) for the linear block ignores the normal."""
@@ -118,3 +89,58 @@ def test_seed_closed_form_normal_equation_block_is_not_MtM():
     assert mtm[0, 0] == pytest.approx(n[0] ** 2 / m**2)
     assert mtm[2, 2] == 0.0  # n_z = 0: no z-row in MᵀM at all
     assert mtm[0, 0] != pytest.approx(1.0 / m**2)  # the seed's 1/(M₁M₂) with M₁ = M₂ = m
+
+
+def package_point(cell, sigma, e, h):
+    """The body point at time h as the package's own integrator moves it:
+    :func:`qpcontact.colony.advance` (centre, axis by the exact rotation, length) and
+    :func:`qpcontact.colony.rotate` for the radial offset, which turns with the body."""
+    moved = advance(cell, h)
+    radial = rotate(e[None], cell.angular_velocities * h)[0]
+    return moved.centers[0] + sigma * moved.lengths[0] * moved.axes[0] + cell.radii[0] * radial
+
+
+@pytest.mark.parametrize("seed", range(10))
+@pytest.mark.parametrize("on_cap", [False, True])
+def test_row_matches_the_motion_of_the_package_integrator(seed, on_cap):
+    """The contact row and the timestep integrator describe the same motion: the row predicts
+    the velocity of a body point as advance() moves it (central differences, O(h²))."""
+    rng = np.random.default_rng(100 + seed)
+    cell = random_cell(rng)
+    sigma, e = sample_point(rng, cell, on_cap)
+    n = rng.normal(size=3)
+    n /= np.linalg.norm(n)
+    h = 1e-6
+    moved = (package_point(cell, sigma, e, h) - package_point(cell, sigma, e, -h)) / (2 * h)
+    assert system_row(cell, sigma, e, n) == pytest.approx(n @ moved, rel=1e-7, abs=1e-8)
+
+
+def test_erratum_1_the_angular_block_is_omega_cross_r():
+    """Seed erratum 1: its M_r has +[r]×I⁻¹, i.e. a point velocity r × ω. For a cell that only
+    turns, the package's row equals the finite difference of the motion (ω × r), and the
+    seed's sign gives the opposite of it."""
+    rng = np.random.default_rng(7)
+    cell = random_cell(rng).replace(momenta=np.zeros((1, 3)), growth_momenta=[0.0])
+    sigma, e = sample_point(rng, cell, False)
+    r = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
+    n = np.cross(cell.angular_velocities[0], r)
+    n /= np.linalg.norm(n)  # the direction in which the point moves
+    fd = n @ fd_velocity(cell, sigma, e)
+    assert fd > 0.1
+    assert system_row(cell, sigma, e, n) == pytest.approx(fd, rel=1e-7)
+    assert n @ np.cross(r, cell.angular_velocities[0]) == pytest.approx(-fd, rel=1e-7)  # the seed's sign
+
+
+def test_erratum_2_a_body_point_rides_with_the_full_length_rate():
+    """Seed erratum 2: with l the full length, a point at axial coordinate s moves by
+    (s/l) l̇ â, not ½ (s/l) l̇ â. For a cell that only grows, the package's row along the axis is
+    the finite difference of the motion, which is twice the seed's."""
+    rng = np.random.default_rng(3)
+    cell = random_cell(rng).replace(momenta=np.zeros((1, 3)), angular_momenta=np.zeros((1, 3)))
+    e = np.cross(cell.axes[0], [0.0, 0.0, 1.0])
+    e /= np.linalg.norm(e)
+    sigma, axis = 0.4, cell.axes[0]
+    fd = axis @ fd_velocity(cell, sigma, e)
+    assert fd == pytest.approx(sigma * cell.growth_rates[0], rel=1e-8)  # s/l · l̇, from the motion
+    assert system_row(cell, sigma, e, axis) == pytest.approx(fd, rel=1e-7)
+    assert abs(0.5 * sigma * cell.growth_rates[0] - fd) > 0.1 * abs(fd)  # the seed's factor ½ is off

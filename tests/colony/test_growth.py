@@ -1,17 +1,17 @@
-"""Growth, division, lineage, snapshots and the simulate command."""
+"""Growth, division and lineage."""
 
 import numpy as np
 import pytest
 
 import qpcontact as q
 from qpcontact.colony.growth import Colony, divide, grow, volumes
-from qpcontact.colony.snapshots import load_colony, save_colony
 from qpcontact.errors import InvalidArgumentError
 
 
 def one_cell(length=2.0, **extra):
     return q.Cells(centers=[[1.0, 2.0, 0.0]], axes=[[0.6, 0.8, 0.0]], lengths=length, radii=0.5, masses=3.0,
                    growth_inertia=30.0, **extra)
+
 
 
 @pytest.mark.parametrize("dynamics", ["overdamped", "inertial"])
@@ -26,6 +26,7 @@ def test_single_cell_grows_exponentially_at_its_rate(dynamics):
     np.testing.assert_allclose(colony.cells.centers[0], [1.0, 2.0, 0.0], atol=1e-12)  # grows about its centre
     # Constant density: the mass follows the volume.
     assert colony.cells.masses[0] / volumes(colony.cells)[0] == pytest.approx(3.0 / volumes(one_cell())[0])
+
 
 
 def test_division_conserves_volume_mass_and_momentum_and_records_lineage():
@@ -67,10 +68,12 @@ def test_division_conserves_volume_mass_and_momentum_and_records_lineage():
         divide(colony, 0.9, np.random.default_rng(0))
 
 
+
 def test_planar_division_keeps_axes_in_the_plane():
     colony = Colony.founder(one_cell(length=5.0), rates=1.0)
     after = divide(colony, 4.0, np.random.default_rng(1), axis_noise=0.3, planar=True)
     assert np.all(after.cells.axes[:, 2] == 0) and np.all(after.cells.centers[:, 2] == 0)
+
 
 
 def test_colony_rejects_bad_lineage():
@@ -81,54 +84,3 @@ def test_colony_rejects_bad_lineage():
         Colony(cells, [0, 1], [-1, -1], [1.0, -1.0])
     with pytest.raises(InvalidArgumentError, match="shape"):
         Colony(cells, [0, 1, 2], [-1, -1], [1.0, 1.0])
-
-
-def test_snapshot_loads_back_equal(tmp_path):
-    cells = q.Cells(centers=[[0, 0, 0], [3, 0, 1]], axes=[[1, 0, 0], [0, 0.6, 0.8]], lengths=[1.0, 2.5],
-                    radii=[0.5, 0.4], masses=[1.0, np.inf], growth_inertia=[10.0, np.inf],
-                    momenta=[[1, 2, 3], [0, 0, 0]], angular_momenta=[[0.1, 0, 0], [0, 0, 0]], growth_momenta=[0.5, 0])
-    colony = Colony(cells, [7, 9], [3, -1], [0.7, 0.0], [0.1, 0.0], time=12.5, next_id=11)
-    path = save_colony(tmp_path / "sub" / "step_000001.npz", colony, step=42)
-    loaded, step = load_colony(path)
-    assert step == 42 and loaded.time == 12.5 and loaded.next_id == 11
-    for name in ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta",
-                 "growth_momenta"):
-        np.testing.assert_array_equal(getattr(loaded.cells, name), getattr(cells, name))
-    for name in ("ids", "parent_ids", "rates", "owed"):
-        np.testing.assert_array_equal(getattr(loaded, name), getattr(colony, name))
-    np.savez(tmp_path / "other.npz", centers=np.zeros((1, 3)))
-    with pytest.raises(InvalidArgumentError, match="not a qpcontact-colony"):
-        load_colony(tmp_path / "other.npz")
-
-
-def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
-    from qpcontact.cli import main
-
-    out = tmp_path / "run"
-    code = main(["simulate", "--cells", "12", "--out", str(out), "--quiet", "--snapshot-every", "50", "--gif"])
-    assert code == 0
-    for name in ("history.csv", "colony.png", "history.png", "colony.gif"):
-        assert (out / name).stat().st_size > 0
-    snapshots = sorted((out / "snapshots").glob("step_*.npz"))
-    assert len(snapshots) >= 2
-    last, step = load_colony(snapshots[-1])
-    assert last.cells.n >= 12 and step > 0
-    assert np.all(last.cells.centers[:, 2] == 0)  # 2D monolayer stayed in the plane
-    # Lineage: every non-founder's parent id is an id that existed before it.
-    assert np.all(last.parent_ids < last.ids)
-    rows = (out / "history.csv").read_text().splitlines()
-    assert rows[0].startswith("step,time,dt,cells") and len(rows) == step + 1
-
-
-@pytest.mark.parametrize("change, message", [
-    ({"cfl": -1.0}, "cfl: must be finite and > 0"),
-    ({"overlap_limit": float("nan")}, "overlap_limit: must be finite and >= 0"),
-    ({"n_cells": 0}, "n_cells: must be an integer >= 1"),
-    ({"dimensions": 4}, "dimensions: must be 2 or 3"),
-    ({"position_correction": 1.5}, r"position_correction: must be in \[0, 1\]"),
-])
-def test_simulate_settings_are_checked(change, message):
-    from qpcontact.colony.simulate import Settings
-
-    with pytest.raises(InvalidArgumentError, match=message):
-        Settings(**change)

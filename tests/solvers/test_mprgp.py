@@ -1,11 +1,10 @@
-"""The built-in matrix-free solver (qpcontact.mprgp): it finds the complementarity optimum where
+"""The built-in matrix-free solver (qpcontact.solvers.mprgp): it finds the complementarity optimum where
 the plain solve would pull, is invariant to the row scaling it undoes, reports what it did not
 finish, and takes only the formulation it solves."""
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from conftest import random_scene
 
 import qpcontact as qc
 from qpcontact.errors import InvalidArgumentError, SolverFailedError
@@ -13,6 +12,7 @@ from qpcontact.resolve import metrics
 from qpcontact.resolve.validation import reference_solution
 from qpcontact.solvers.mprgp import mprgp
 from qpcontact.studies import scenes
+from tests.helpers import assert_kkt, random_scene
 
 
 def system_of(cells):
@@ -21,7 +21,7 @@ def system_of(cells):
 
 
 @pytest.mark.parametrize("scene", [
-    lambda: random_scene(3, n=60),
+    lambda: random_scene(3, n_cells=60),
     lambda: scenes.colony_2d(400, 1),
     lambda: scenes.colony_3d(400, 2),
 ])
@@ -37,16 +37,39 @@ def test_mprgp_reaches_the_complementarity_optimum(scene):
 
 
 def test_mprgp_finds_the_contacts_that_stop_pushing():
-    """On a scene where the plain solve pulls, the answer has contacts at the bound."""
+    """On a scene where the plain solve pulls, the answer has contacts at the bound, and it is
+    the optimum: the KKT conditions of the complementarity QP hold (an independent certificate,
+    whatever solver produced the answer), and Clarabel finds the same answer."""
     for seed in range(50):
-        cells = random_scene(seed, n=30)
+        cells = random_scene(seed, n_cells=30)
         linear = qc.resolve(cells, solver="linear")
         if np.any(linear.contact_impulses < -1e-6 * np.max(np.abs(linear.contact_impulses))):
             break
+    else:
+        pytest.fail("no scene among 50 seeds where the plain solve pulls")
     result = qc.resolve(cells, solver="mprgp", tolerance=1e-9)
     assert result.converged and np.any(result.contact_impulses == 0)
+    lam = result.contact_impulses * result.system.operator_scale**2 / result.system.velocity_scale
+    assert_kkt(result.system, result.scaled_solution, lam, 1e-8)
     clarabel = qc.resolve(cells, solver="clarabel", tolerance=1e-10)
     assert metrics.distance(result.scaled_solution, clarabel.scaled_solution) < 1e-6
+
+
+def test_a_wrong_answer_fails_the_kkt_certificate():
+    """The check above can fail: pulling impulses (the plain solve) or too large ones do not pass."""
+    for seed in range(50):
+        linear = qc.resolve(random_scene(seed, n_cells=30), solver="linear")
+        lam = linear.contact_impulses * linear.system.operator_scale**2 / linear.system.velocity_scale
+        if lam.min() < -1e-6 * np.abs(lam).max():
+            break
+    else:
+        pytest.fail("no scene among 50 seeds where the plain solve pulls")
+    with pytest.raises(AssertionError, match="pulling"):
+        assert_kkt(linear.system, linear.scaled_solution, lam, 1e-8)
+    optimum = qc.resolve(random_scene(seed, n_cells=30), solver="mprgp", tolerance=1e-9)
+    lam = optimum.contact_impulses * optimum.system.operator_scale**2 / optimum.system.velocity_scale
+    with pytest.raises(AssertionError, match="slackness"):
+        assert_kkt(optimum.system, 2 * optimum.scaled_solution, 2 * lam, 1e-8)
 
 
 def test_row_scaling_does_not_change_the_answer():
@@ -86,7 +109,7 @@ def test_zero_rows_are_empty_or_infeasible():
 
 
 def test_mprgp_takes_only_the_complementarity_formulation_and_its_own_settings():
-    cells = random_scene(0, n=20)
+    cells = random_scene(0, n_cells=20)
     with pytest.raises(InvalidArgumentError, match="'mprgp' solves the complementarity formulation"):
         qc.resolve(cells, solver="mprgp", formulation="least_squares")
     with pytest.raises(InvalidArgumentError, match="contact form only"):

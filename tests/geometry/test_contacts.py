@@ -4,11 +4,12 @@ import itertools
 
 import numpy as np
 import pytest
-from conftest import random_scene
 
 import qpcontact as qc
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry.contacts import candidate_pairs, colliding, narrow_phase
+from qpcontact.studies import scenes
+from tests.helpers import random_scene
 
 
 def rods(centres, axes, lengths, radii=0.5, **kw):
@@ -22,7 +23,7 @@ def keyed(contacts):
 @pytest.mark.parametrize("seed", range(5))
 @pytest.mark.parametrize("margin", [0.0, 0.3])
 def test_broad_phase_finds_every_touching_pair(seed, margin):
-    cells = random_scene(seed, n=60, box=6.0)
+    cells = random_scene(seed, n_cells=60, box=6.0)
     # Mixed lengths: a few long rods must still be found against everything they touch.
     cells = cells.replace(lengths=np.where(np.arange(60) % 17 == 0, 8.0, cells.lengths))
     all_pairs = np.array(list(itertools.combinations(range(cells.n), 2)))
@@ -135,3 +136,41 @@ def test_colliding_keeps_approaching_pairs_and_position_correction():
     assert len(active) == 2 and np.allclose(np.sort(b), [0.09, 1.1])
     with pytest.raises(InvalidArgumentError, match="dt"):
         colliding(contacts, position_correction=0.5)
+
+
+# ------------------------------------------------------------------------------------------
+# The vectorized broad and narrow phases give the same answers as the plain definitions
+# ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("seed", range(4))
+def test_broad_phase_keeps_the_sorted_unique_pairs(seed):
+    """Rods of many pieces (lengths up to 6× the median) produce repeated piece pairs; the result
+    is the sorted unique list, the same as np.unique(axis=0) over all touching pairs."""
+    rng = np.random.default_rng(seed)
+    n = 60
+    cells = qc.Cells(rng.uniform(0, 6, (n, 3)), rng.normal(size=(n, 3)), rng.choice([0.0, 1.0, 6.0], n), 0.4,
+                     normalize_axes=True)
+    pairs = candidate_pairs(cells)
+    assert np.array_equal(pairs, np.unique(pairs, axis=0))
+    everything = np.array([(i, j) for i in range(n) for j in range(i + 1, n)])
+    touching = narrow_phase(cells, everything)
+    found = narrow_phase(cells, pairs)
+    assert np.array_equal(found.cell_a, touching.cell_a) and np.array_equal(found.cell_b, touching.cell_b)
+    assert np.allclose(found.normal, touching.normal, rtol=0, atol=1e-12)
+
+
+def test_broad_phase_of_cells_whose_only_close_pieces_are_their_own():
+    """One long rod alone: its pieces are within reach of each other but no pair remains."""
+    cells = qc.Cells([[0.0, 0.0, 0.0], [50.0, 0.0, 0.0], [0.0, 50.0, 0.0]], [1.0, 0.0, 0.0], [9.0, 1.0, 1.0], 0.5)
+    assert candidate_pairs(cells).shape == (0, 2)
+
+
+def test_narrow_phase_order_does_not_depend_on_the_pair_order():
+    cells = scenes.colony_2d(300, seed=1)
+    pairs = candidate_pairs(cells)
+    shuffled = pairs[np.random.default_rng(0).permutation(len(pairs))]
+    a, b = narrow_phase(cells, pairs, planar=True), narrow_phase(cells, shuffled, planar=True)
+    for name in ("cell_a", "cell_b", "normal", "offset_a", "separation", "normal_velocity"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    # by pair, then along a (two contacts of parallel neighbours in increasing s)
+    key = a.cell_a.astype(np.int64) * cells.n + a.cell_b
+    assert np.all(np.diff(key) >= 0)

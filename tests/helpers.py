@@ -1,0 +1,97 @@
+"""Shared scene builders and checks for the tests (small, seeded, fast)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+import qpcontact as qc
+from qpcontact.assembly import ContactSystem
+from qpcontact.geometry import inertia_times
+
+
+def random_scene(
+    seed: int,
+    n_cells: int = 30,
+    *,
+    planar: bool = False,
+    box: float = 5.0,
+    converging: float = 1.0,
+    mass_spread: float = 4.0,
+    growing: bool = True,
+    unit_length: float = 1.0,
+    unit_mass: float = 1.0,
+) -> qc.Cells:
+    """Rods of random length and orientation in a box, moving towards the box centre (so most
+    contacts approach), with random extra momenta and growth. ``unit_length``/``unit_mass``
+    express the same scene in other units (time unit unchanged)."""
+    rng = np.random.default_rng(seed)
+    n = n_cells
+    centres = rng.uniform(0.0, box, (n, 3))
+    axes = rng.normal(size=(n, 3))
+    if planar:
+        centres[:, 2] = 0.0
+        axes[:, 2] = 0.0
+    axes /= np.linalg.norm(axes, axis=1)[:, None]
+    lengths = rng.uniform(0.5, 2.5, n)
+    radii = rng.uniform(0.3, 0.6, n)
+    masses = rng.uniform(1.0, mass_spread, n)
+    velocity = -converging * (centres - centres.mean(axis=0)) + rng.normal(0, 0.3, (n, 3))
+    omega = rng.normal(0, 0.3, (n, 3))
+    if planar:
+        velocity[:, 2] = 0.0
+        omega[:, :2] = 0.0
+    momenta = masses[:, None] * velocity
+    angular = inertia_times(axes, lengths, radii, masses, omega)  # L = I ω
+    growth = (masses * rng.uniform(0.0, 0.5, n)) if growing else np.zeros(n)
+    return qc.Cells(
+        centres * unit_length, axes, lengths * unit_length, radii * unit_length,
+        masses=masses * unit_mass, growth_inertia=(masses if growing else np.full(n, np.inf)) * unit_mass,
+        momenta=momenta * unit_mass * unit_length, angular_momenta=angular * unit_mass * unit_length**2,
+        growth_momenta=growth * unit_mass * unit_length,
+    )
+
+
+def system_of(cells: qc.Cells, **colliding_options) -> ContactSystem:
+    """The assembled system of the colliding contacts of ``cells``."""
+    active, b = qc.colliding(qc.find_contacts(cells), **colliding_options)
+    return qc.build_system(cells, active, b)
+
+
+def assert_kkt(system: ContactSystem, y: np.ndarray, lam: np.ndarray, tolerance: float) -> None:
+    """The KKT conditions of the complementarity QP ``min ½‖ỹ‖², B̃ỹ ≥ b̃`` hold to
+    ``tolerance`` (relative to the largest contact impulse): ``ỹ = B̃ᵀλ̃`` (stationarity),
+    ``B̃ỹ ≥ b̃`` (primal feasibility), ``λ̃ ≥ 0`` (dual feasibility) and ``λ̃ₖ(B̃ỹ − b̃)ₖ = 0``
+    (complementary slackness). They certify the unique optimum whatever solver produced it."""
+    scale = max(float(np.abs(lam).max(initial=0.0)), 1.0)
+    slack = system.matrix @ y - system.rhs
+    assert np.linalg.norm(y - system.matrix.T @ lam) <= tolerance * max(np.linalg.norm(y), 1.0), "stationarity"
+    assert slack.min(initial=0.0) >= -tolerance, f"penetration {-slack.min():.3g}"
+    assert lam.min(initial=0.0) >= -tolerance * scale, f"pulling impulse {lam.min():.3g}"
+    assert np.max(np.abs(lam * slack), initial=0.0) <= tolerance * scale, "complementary slackness"
+
+
+def world_operators(cells: qc.Cells, contacts: qc.Contacts) -> tuple[np.ndarray, np.ndarray]:
+    """Dense ``J`` (K × 7N) and ``W`` (7N × 7N) in the world frame, straight from model.md's
+    formulas (no slot basis, no reduction): J rows ``[nᵀ, (r × n)ᵀ, (s/l)(â·n)]`` per side (minus
+    for side b), ``W`` block-diagonal with ``1/m``, the axisymmetric ``I⁻¹`` and ``1/G``; fixed
+    cells and non-growing lengths get zeros. ``M = J W``."""
+    n_cells, k = cells.n, len(contacts)
+    J = np.zeros((k, 7 * n_cells))
+    for side, sign in (("a", 1.0), ("b", -1.0)):
+        cell = getattr(contacts, f"cell_{side}")
+        r = getattr(contacts, f"offset_{side}")
+        stretch = getattr(contacts, f"stretch_{side}")
+        for row in range(k):  # reference only: a loop over the contacts of a small scene
+            c = cell[row]
+            if c < 0:
+                continue
+            normal = contacts.normal[row]
+            J[row, 7 * c:7 * c + 3] += sign * normal
+            J[row, 7 * c + 3:7 * c + 6] += sign * np.cross(r[row], normal)
+            J[row, 7 * c + 6] += sign * stretch[row] * (cells.axes[c] @ normal)
+    W = np.zeros((7 * n_cells, 7 * n_cells))
+    for c in range(n_cells):
+        W[7 * c:7 * c + 3, 7 * c:7 * c + 3] = np.eye(3) / cells.masses[c]
+        W[7 * c + 3:7 * c + 6, 7 * c + 3:7 * c + 6] = cells.subset([c]).apply_inverse_inertia(np.eye(3))
+        W[7 * c + 6, 7 * c + 6] = 1.0 / cells.growth_inertia[c] if np.isfinite(cells.masses[c]) else 0.0
+    return J, W

@@ -1,0 +1,26 @@
+"""The demo (the quick start's main job): a row per installed solver and formulation."""
+
+from __future__ import annotations
+
+import qpcontact as qc
+from qpcontact import cli
+
+
+def test_demo_prints_a_row_per_solver_and_formulation(tmp_path, capsys):
+    out = tmp_path / "demo.md"
+    assert cli.main(["demo", "--cells", "60", "--out", str(out)]) == 0
+    text = out.read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| ") and not line.startswith("| solver")]
+    expected = [(solver, formulation) for solver in qc.available_solvers()
+                for formulation in qc.get_solver(solver).formulations]
+    assert [tuple(cell.strip() for cell in row.split("|")[1:3]) for row in rows] == expected
+    bundled = [row for row in rows if qc.get_solver(row.split("|")[1].strip()).bundled]
+    assert {row.split("|")[1].strip() for row in bundled} == {"linear", "mprgp", "osqp", "clarabel"}
+    assert all("| yes |" in row for row in bundled)
+    assert "colliding contacts" in capsys.readouterr().out
+
+
+def test_demo_in_3d(tmp_path):
+    out = tmp_path / "demo.md"
+    assert cli.main(["demo", "--cells", "40", "--dimensions", "3", "--out", str(out)]) == 0
+    assert out.read_text().startswith("3D colony, 40 cells")

@@ -1,0 +1,138 @@
+"""The package as a whole: the wing layout holds, the public API and the README example work,
+the documents name files and tests that exist, and the command line lists its commands."""
+
+from __future__ import annotations
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import qpcontact as qc
+from qpcontact import cli
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "qpcontact"
+#: The wings, lowest first: a module may import from its own wing and the ones before it.
+WINGS = ("geometry", "assembly", "solvers", "resolve", "colony", "studies")
+
+
+def _wing_of(module: str) -> str | None:
+    """``qpcontact.x.y`` -> ``x`` if it is a wing (``errors`` and the top level are not)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in WINGS else None
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    """(line, absolute module) of every qpcontact import in a module, relative ones resolved."""
+    package = ".".join(path.relative_to(ROOT).with_suffix("").parts)
+    if path.name != "__init__.py":
+        package = package.rsplit(".", 1)[0]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            targets = [module] if node.module else [f"{module}.{alias.name}" for alias in node.names]
+            found += [(node.lineno, t) for t in targets if t.startswith("qpcontact")]
+        elif isinstance(node, ast.Import):
+            found += [(node.lineno, alias.name) for alias in node.names if alias.name.startswith("qpcontact")]
+    return found
+
+
+def test_no_wing_imports_from_a_higher_wing_or_the_top_level():
+    violations = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        wing = _wing_of(".".join(path.relative_to(ROOT).with_suffix("").parts))
+        if wing is None:
+            continue
+        for line, module in _imports(path):
+            target = _wing_of(module)
+            if module == "qpcontact" or (target is not None and WINGS.index(target) > WINGS.index(wing)):
+                violations.append(f"{path.relative_to(ROOT)}:{line} ({wing}) imports {module}")
+    assert not violations, "\n".join(violations)
+
+
+def test_the_layout_rule_is_checked_on_the_real_imports():
+    """The check above would catch an upward import (guards the test itself)."""
+    imports = dict((m, line) for line, m in _imports(PACKAGE / "resolve" / "resolve.py"))
+    assert "qpcontact.solvers" in imports and "qpcontact.assembly.system" in imports
+    assert _wing_of("qpcontact.studies.compare") == "studies" and _wing_of("qpcontact.errors") is None
+
+
+def test_importing_qpcontact_leaves_out_the_studies_and_plotting():
+    code = ("import sys, qpcontact; print(sorted(m for m in sys.modules if m.startswith(('qpcontact.studies', "
+            "'matplotlib', 'tqdm'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.strip() == "[]"
+
+
+def test_public_api_of_the_readme_and_the_wings():
+    for name in ("Cells", "resolve", "available_solvers", "compare_with_linear", "find_contacts", "colliding",
+                 "build_system", "Result", "SolverFailedError", "step", "grow", "divide", "Colony",
+                 "expansion_time_step", "save_colony", "load_colony", "Plane", "substrate", "get_solver"):
+        assert hasattr(qc, name), name
+    assert callable(qc.resolve) and callable(qc.step)
+    assert qc.FORMULATIONS == ("least_squares", "complementarity", "linear")
+    assert qc.__version__
+
+
+def test_readme_example_runs():
+    block = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)[0]
+    namespace: dict = {}
+    exec(compile(block, "README.md", "exec"), namespace)
+    result = namespace["result"]
+    assert result.converged and len(result.contacts) == 1
+    assert np.allclose(result.impulses[0, :3], [0.0, 0.5, 0.0], atol=1e-6)
+
+
+DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+def test_documents_name_files_and_tests_that_exist(document):
+    """Every ``qpcontact/…py``, ``tests/…py[::test]``, ``examples/…py`` and ``qpcontact.x.y``
+    module path a document names exists (so that a move cannot leave stale paths behind)."""
+    text = document.read_text()
+    missing = []
+    for path, test in re.findall(r"\b((?:qpcontact|tests|examples)/[\w/]+\.py)(?:::(\w+))?", text):
+        if not (ROOT / path).exists():
+            missing.append(path)
+        elif test and not re.search(rf"def {test}\b", (ROOT / path).read_text()):
+            missing.append(f"{path}::{test}")
+    for dotted in set(re.findall(r"`(qpcontact(?:\.\w+)+)", text)):
+        module, attribute = dotted, None
+        while module.count(".") and not (ROOT / (module.replace(".", "/") + ".py")).exists() \
+                and not (ROOT / module.replace(".", "/") / "__init__.py").exists():
+            module, attribute = module.rsplit(".", 1)[0], dotted[len(module.rsplit(".", 1)[0]) + 1:]
+        if attribute is not None:
+            obj = __import__(module, fromlist=["_"])
+            for part in attribute.split("."):
+                if not hasattr(obj, part):
+                    missing.append(dotted)
+                    break
+                obj = getattr(obj, part)
+    assert not missing, f"{document.name} names what does not exist: {sorted(set(missing))}"
+
+
+def test_cli_lists_commands_and_rejects_unknown_ones(capsys):
+    assert cli.main([]) == 0
+    listing = capsys.readouterr().out
+    assert all(command in listing for command in ("demo", "compare", "stability", "simulate", "bench"))
+    assert cli.main(["frobnicate"]) == 2
+
+
+@pytest.mark.parametrize("document", [d for d in DOCUMENTS if d.name not in ("README.md", "architecture.md")
+                                      and "```python" in d.read_text()], ids=lambda p: p.name)
+def test_python_examples_in_the_documents_run(document):
+    """(The README's example is checked above; docs/architecture.md's solver is registered and used
+    by tests/solvers/test_registry.py.)"""
+    for block in re.findall(r"```python\n(.*?)```", document.read_text(), re.S):
+        exec(compile(block, document.name, "exec"), {})
