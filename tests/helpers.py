@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import qpcontact as qc
 from qpcontact.assembly import ContactSystem
@@ -49,6 +50,18 @@ def random_scene(
         momenta=momenta * unit_mass * unit_length, angular_momenta=angular * unit_mass * unit_length**2,
         growth_momenta=growth * unit_mass * unit_length,
     )
+
+
+def pulling_scene(n_cells: int = 30, seeds: int = 50) -> qc.Cells:
+    """The first :func:`random_scene` whose plain solve pulls at some contact (a contact impulse
+    below −1e-6 of the largest), so that the complementarity answer differs from it; fails the
+    test if none of ``seeds`` seeds gives one."""
+    for seed in range(seeds):
+        cells = random_scene(seed, n_cells=n_cells)
+        linear = qc.resolve(cells, solver="linear")
+        if np.any(linear.contact_impulses < -1e-6 * np.max(np.abs(linear.contact_impulses))):
+            return cells
+    pytest.fail(f"no scene among {seeds} seeds where the plain solve pulls")
 
 
 def system_of(cells: qc.Cells, **colliding_options) -> ContactSystem:

@@ -126,6 +126,11 @@ class ContactSystem:
         """Physical contact impulses ``λ`` [mass·length/time] from scaled ``λ̃``."""
         return lam * self.velocity_scale / self.operator_scale**2
 
+    def from_contact_impulses(self, contact_impulses: np.ndarray) -> np.ndarray:
+        """Scaled ``λ̃`` from physical contact impulses ``λ`` (the inverse of
+        :meth:`to_contact_impulses`)."""
+        return contact_impulses * self.operator_scale**2 / self.velocity_scale
+
     def from_impulses(self, impulses: np.ndarray) -> np.ndarray:
         """Scaled unknowns ``ỹ`` for (N, 7) impulses (the part that lies in the columns)."""
         x = np.einsum("ij,ij->i", impulses[self.column_cell], self.column_basis)

@@ -113,7 +113,7 @@ def check(prep: Prepared, formulation: str, impulses: np.ndarray, contact_impuls
     if not (np.all(np.isfinite(impulses)) and (contact_impulses is None or np.all(np.isfinite(contact_impulses)))):
         return {**measures, "failed": ["finite"]}
     if contact_impulses is not None:
-        lam = contact_impulses * system.operator_scale**2 / system.velocity_scale
+        lam = system.from_contact_impulses(contact_impulses)
         measures["multiplier_consistency"] = metrics.multiplier_consistency(system, y, lam)
         if formulation == "complementarity":
             measures["complementarity"] = metrics.complementarity_residual(system, y, lam)
