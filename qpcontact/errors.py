@@ -24,11 +24,12 @@ class InvalidArgumentError(QPContactError, ValueError):
 
 
 class UnknownSolverError(QPContactError, ValueError):
-    """The solver name is neither ``"linear"`` nor a qpsolvers backend name."""
+    """No solver of that name is registered (:func:`qpcontact.solvers.get_solver`)."""
 
 
 class SolverNotInstalledError(QPContactError, ImportError):
-    """The solver is a known qpsolvers backend, but its Python package is not installed."""
+    """The solver is registered (e.g. a known qpsolvers backend), but its Python package is not
+    installed."""
 
 
 class SolverFailedError(QPContactError, RuntimeError):

@@ -42,6 +42,7 @@ import argparse
 import fnmatch
 import multiprocessing
 import platform
+import sys
 import time
 import traceback
 from datetime import UTC, datetime
@@ -339,7 +340,11 @@ def main(argv: list[str] | None = None) -> int:
 
     patterns = args.cases.split(",")
     cases = [c for name, c in CATALOGUE.items() if any(fnmatch.fnmatch(name, p) for p in patterns)]
-    triples = runs(args.solvers.split(","), args.formulations.split(","), args.forms.split(","))
+    try:
+        triples = runs(args.solvers.split(","), args.formulations.split(","), args.forms.split(","))
+    except QPContactError as exc:  # an unknown or uninstalled solver name
+        print(f"qpcontact stability: {exc}", file=sys.stderr)
+        return 2
     scalings = [s == "on" for s in args.scaling.split(",")]
     preps: dict[str, Prepared] = {}
     rows: list[dict[str, Any]] = []

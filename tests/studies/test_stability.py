@@ -175,3 +175,8 @@ def test_piqp_contact_form_solves_small_cases():
     for name in ("parallel_0", "aspect_1", "mass_ratio_1e-08"):
         result, _ = _resolve(name, solver="piqp", formulation="complementarity", form="contact")
         assert result.converged and result.errors["penetration"] <= KKT_LIMIT
+
+
+def test_stability_command_names_an_unknown_solver(tmp_path, capsys):
+    assert main(["--solvers", "nosuch", "--cases", "crossing", "--out", str(tmp_path / "stab")]) == 2
+    assert "qpcontact stability: unknown solver 'nosuch'" in capsys.readouterr().err
