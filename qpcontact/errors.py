@@ -42,3 +42,12 @@ class SolverFailedError(QPContactError, RuntimeError):
     def __init__(self, message: str, result: Any = None):
         super().__init__(message)
         self.result = result
+
+
+class StepFailedError(SolverFailedError):
+    """A position-level colony step did not reach its overlap tolerance within its iteration cap,
+    or one of its solves failed.
+
+    ``result`` holds the unconverged :class:`qpcontact.colony.PositionStepResult` (``converged``
+    is False); the caller still holds the cells of the start of the step, which stand.
+    """

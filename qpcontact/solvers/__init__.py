@@ -4,7 +4,7 @@ Every solver is one module here that registers a
 :class:`~qpcontact.solvers.registry.SolverSpec` at import; the imports below register them, in
 the order the listings show them: the plain solve (:mod:`.linear`), the study baselines
 (:mod:`.baselines`: ``cg``, ``cg_euclidean``, ``bbpgd``), the built-in matrix-free QP solver
-(:mod:`.mprgp`) and every qpsolvers backend (:mod:`.qpsolvers_bridge`). Everything that picks
+(:mod:`.mprgp`), the built-in interior-point solver that takes bounds (:mod:`.ipm`) and every qpsolvers backend (:mod:`.qpsolvers_bridge`). Everything that picks
 a solver asks the registry: :func:`solve` (the one dispatch), :func:`get_solver`,
 :func:`available_solvers`.
 
@@ -34,6 +34,7 @@ example.
 from . import linear  # noqa: F401  (registers "linear")
 from . import baselines  # noqa: F401  (registers "cg", "cg_euclidean", "bbpgd")
 from . import mprgp  # noqa: F401  (registers "mprgp")
+from . import ipm  # noqa: F401  (registers "ipm")
 from . import qpsolvers_bridge  # noqa: F401  (registers every qpsolvers backend)
 # isort: on
 from .blocks import BLOCK_ROWS, independent_blocks

@@ -93,20 +93,24 @@ def tolerance_settings(backend: str, tolerance: float, time_limit: float | None,
         if time_limit:
             s["time_limit"] = float(time_limit)
     elif backend in ("cvxopt", "kvxopt", "ecos"):
-        s = {"abstol": tolerance, "reltol": tolerance, "feastol": tolerance}
+        s = {"abstol": gap, "reltol": gap, "feastol": tolerance}
     else:  # backends without a tolerance option (quadprog, daqp, ...) solve to their own accuracy
         s = {}
     return s
 
 
 def qp_problem(matrix: sp.spmatrix, rhs: np.ndarray, formulation: str, form: str,
-               regularization: float = 0.0) -> qpsolvers.Problem:
+               regularization: float = 0.0, lower: np.ndarray | None = None,
+               upper: np.ndarray | None = None) -> qpsolvers.Problem:
     """The qpsolvers Problem for ``B̃ = matrix``, ``b̃ = rhs`` in a formulation and form (see the
-    module docstring)."""
+    module docstring); ``lower``/``upper`` bound ``ỹ`` (complementarity, primal form only)."""
     B = matrix.tocsc()
     k, n = B.shape
     if formulation == "complementarity" and form == "primal":
-        return qpsolvers.Problem(P=sp.identity(n, format="csc"), q=np.zeros(n), G=-B, h=-rhs)
+        bounded = lower is not None or upper is not None
+        lb = (np.full(n, -np.inf) if lower is None else lower) if bounded else None
+        ub = (np.full(n, np.inf) if upper is None else upper) if bounded else None
+        return qpsolvers.Problem(P=sp.identity(n, format="csc"), q=np.zeros(n), G=-B, h=-rhs, lb=lb, ub=ub)
     if formulation == "complementarity" and form == "contact":
         # Sorted indices: PIQP misreads a CSC matrix with unsorted indices (what a sparse product
         # returns) and reported "dual infeasible" on 29 of 41 stability cases (docs/stability.md).
@@ -173,7 +177,7 @@ def solve_backend(backend: str, problem: Problem, formulation: str, form: str, *
     options = {**tolerance_settings(backend, tolerance, time_limit, formulation), **settings}
     B, rhs = problem.matrix, problem.rhs
     t0 = time.perf_counter()
-    qp = qp_problem(B, rhs, formulation, form, problem.regularization)
+    qp = qp_problem(B, rhs, formulation, form, problem.regularization, problem.lower, problem.upper)
     if _dense_only(backend):
         qp = qpsolvers.Problem(*(_dense(m) for m in qp.unpack()))
     t1 = time.perf_counter()
@@ -210,7 +214,7 @@ for _backend in sorted(set(KNOWN_BACKENDS) | set(qpsolvers.available_solvers)):
         _backend, formulations=QP_FORMULATIONS, forms=QP_FORMS, warm_start=False, time_limit=_backend in TIME_LIMITED,
         solve=partial(solve_backend, _backend), available=partial(_installed, _backend),
         description=f"{_backend} through qpsolvers", settings=None, blockwise=True, dense=_dense_only(_backend),
-        bundled=_backend in BUNDLED,
+        bundled=_backend in BUNDLED, bounds=("primal",),
         install_hint="is a qpsolvers backend but its package is not installed (pip install 'qpcontact[solvers]' or "
                      "the backend's own package)",
     ))

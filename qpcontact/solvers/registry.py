@@ -62,12 +62,23 @@ class Problem:
         column_inverse_mass: (n,) the diagonal of ``W`` per column (for solvers that work in the
             raw impulses ``x = W^{-1/2} ỹ``), or None.
         regularization: ε of the least_squares formulation (0: the exact minimum-norm choice).
+        lower, upper: (n,) bounds ``l ≤ ỹ ≤ u`` on the scaled unknowns (``∓inf`` where a column
+            has none), or None: only solvers declaring :attr:`SolverSpec.bounds` take them (the
+            position-level step bounds the turning and shrinking of cells with them). With
+            bounds, ``ỹ = B̃ᵀλ̃ + α − β`` (the bound multipliers), not ``B̃ᵀλ̃``.
     """
 
     matrix: sp.csr_matrix
     rhs: np.ndarray
     column_inverse_mass: np.ndarray | None = None
     regularization: float = 0.0
+    lower: np.ndarray | None = None
+    upper: np.ndarray | None = None
+
+    @property
+    def bounded(self) -> bool:
+        """Some column has a finite bound."""
+        return any(v is not None and bool(np.isfinite(v).any()) for v in (self.lower, self.upper))
 
     @classmethod
     def of(cls, system: ContactSystem, regularization: float = 0.0) -> Problem:
@@ -82,8 +93,11 @@ class Problem:
 
     def block(self, rows: np.ndarray, columns: np.ndarray) -> Problem:
         """The sub-problem on these rows and columns (an independent block)."""
-        inverse_mass = None if self.column_inverse_mass is None else self.column_inverse_mass[columns]
-        return Problem(self.matrix[rows][:, columns], self.rhs[rows], inverse_mass, self.regularization)
+        def part(values: np.ndarray | None) -> np.ndarray | None:
+            return None if values is None else values[columns]
+
+        return Problem(self.matrix[rows][:, columns], self.rhs[rows], part(self.column_inverse_mass),
+                       self.regularization, part(self.lower), part(self.upper))
 
 
 @dataclass
@@ -204,6 +218,8 @@ class SolverSpec:
         bundled: installed with qpcontact itself (its own code or a required dependency): the
             demo and the tests expect it to work.
         install_hint: how to install it, said when ``available()`` is false.
+        bounds: the forms in which it takes bounds on ``ỹ`` (:attr:`Problem.lower`,
+            :attr:`Problem.upper`).
     """
 
     name: str
@@ -221,6 +237,7 @@ class SolverSpec:
     baseline: bool = False
     bundled: bool = False
     install_hint: str = "is not installed"
+    bounds: tuple[str, ...] = ()
 
     @property
     def plain(self) -> bool:
@@ -273,8 +290,8 @@ def register(spec: SolverSpec, *, replace: bool = False) -> SolverSpec:
     if spec.name in _SOLVERS and not replace:
         raise ValueError(f"solver {spec.name!r} is already registered")
     for what, values, known in (("formulations", spec.formulations, FORMULATIONS), ("forms", spec.forms, FORMS),
-                                ("matrix_free", spec.matrix_free, spec.forms)):
-        if (not values and what != "matrix_free") or not set(values) <= set(known):
+                                ("matrix_free", spec.matrix_free, spec.forms), ("bounds", spec.bounds, spec.forms)):
+        if (not values and what not in ("matrix_free", "bounds")) or not set(values) <= set(known):
             raise ValueError(f"solver {spec.name!r}: {what} must be a non-empty subset of {known}, got {values!r}")
     _SOLVERS[spec.name] = spec
     return spec
@@ -340,6 +357,9 @@ def solve(
     spec.check_settings(settings)
     if initial is not None and not spec.warm_start:
         raise InvalidArgumentError(f"initial: solver {solver!r} takes no initial guess")
+    if problem.bounded and form not in spec.bounds:
+        where = f"in {_words(spec.bounds)} form only" if spec.bounds else "none"
+        raise InvalidArgumentError(f"bounds: solver {solver!r} takes bounds on ỹ {where} (form {form!r})")
     if spec.blockwise:
         return solve_by_blocks(spec, problem, formulation, form, tolerance=tolerance, time_limit=time_limit,
                                settings=settings, initial=initial, split=split)

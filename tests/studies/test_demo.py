@@ -15,7 +15,7 @@ def test_demo_prints_a_row_per_solver_and_formulation(tmp_path, capsys):
                 for formulation in qc.get_solver(solver).formulations]
     assert [tuple(cell.strip() for cell in row.split("|")[1:3]) for row in rows] == expected
     bundled = [row for row in rows if qc.get_solver(row.split("|")[1].strip()).bundled]
-    assert {row.split("|")[1].strip() for row in bundled} == {"linear", "mprgp", "osqp", "clarabel"}
+    assert {row.split("|")[1].strip() for row in bundled} == {"linear", "mprgp", "ipm", "osqp", "clarabel"}
     assert all("| yes |" in row for row in bundled)
     assert "colliding contacts" in capsys.readouterr().out
 
