@@ -242,12 +242,21 @@ def interior_point(
     cap = max_iterations or MAX_ITERATIONS
     normal = NormalMatrix(B)
 
-    # Start: unit impulses, ỹ = B̃ᵀλ moved inside the bounds, slacks at least 1 (contacts) and a
-    # hundredth of the bound interval (bounds). Infeasible starts are fine: the residuals enter
-    # the Newton equations.
+    # Start (Mehrotra's heuristic): the least-squares impulses of (B̃B̃ᵀ + I)λ = b̃, ỹ = B̃ᵀλ moved
+    # inside the bounds (a hundredth of the interval), then impulses and slacks shifted to be
+    # positive and balanced. It saves about a sixth of the iterations on grown colonies against
+    # unit impulses (docs/performance.md). Infeasible starts are fine: the residuals enter the
+    # Newton equations. Bound slacks start at the distance to the bound.
     margin = np.where(has_lo & has_hi, 0.01 * (hi - lo), 0.01)
-    y = np.clip(Bt @ np.ones(k), np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
-    x = _Iterate(y=y, s=np.maximum(B @ y - b, 1.0), lam=np.ones(k),
+    lam0 = normal.factor(np.ones(n), np.ones(k))(b)
+    y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
+    s0 = B @ y - b
+    lam0 = lam0 + max(-1.5 * float(lam0.min(initial=0.0)), 0.0)
+    s0 = s0 + max(-1.5 * float(s0.min(initial=0.0)), 0.0)
+    product = float(lam0 @ s0)
+    lam0 = lam0 + 0.5 * product / max(float(s0.sum()), 1e-300) + 1e-3
+    s0 = s0 + 0.5 * product / max(float(lam0.sum()), 1e-300) + 1e-3
+    x = _Iterate(y=y, s=s0, lam=lam0,
                  p=np.where(has_lo, np.maximum(y - lo, margin), 1.0), q=np.where(has_hi, np.maximum(hi - y, margin), 1.0),
                  alpha=has_lo.astype(float), beta=has_hi.astype(float))
     best_error, best, best_iteration = np.inf, x, 0
