@@ -57,18 +57,21 @@ STEP_FRACTION = 0.995
 
 
 class NormalMatrix:
-    """``B̃ diag(w) B̃ᵀ + diag(d)`` for a fixed ``B̃`` and changing ``w > 0``, ``d > 0``: the
-    lower triangle in CSC with a fixed pattern, refilled by one ``np.bincount`` per call, and its
-    sparse Cholesky factorization (CHOLMOD, supernodal, through cvxopt; the symbolic analysis and
-    fill-reducing ordering are done once).
+    """``B̃ diag(w) B̃ᵀ + diag(d)`` for a fixed sparsity pattern of ``B̃`` and changing ``w > 0``,
+    ``d > 0``: the lower triangle in CSC with a fixed pattern, refilled by one ``np.bincount``
+    per call, and its sparse Cholesky factorization (CHOLMOD, supernodal, through cvxopt; the
+    symbolic analysis and fill-reducing ordering are done once per pattern).
 
     Every product ``B̃_ic B̃_jc`` (``i ≥ j``, same column ``c``) is listed once at construction
     with the position of entry ``(i, j)`` in the pattern, so a refill is a weighted sum over that
-    list (memory: 16 bytes per product; a 2D colony has about 35 products per contact)."""
+    list (memory: 24 bytes per product; a 2D colony has about 35 products per contact). A matrix
+    with the same pattern and other values (the next linearization of a position-level step, with
+    the same contacts) reuses all of it through :meth:`refresh`."""
 
     def __init__(self, matrix: sp.spmatrix) -> None:
         csc = sp.csc_matrix(matrix)
         csc.sum_duplicates()
+        csc.sort_indices()
         k, n = csc.shape
         counts = np.diff(csc.indptr)
         squares = counts.astype(np.int64) ** 2
@@ -79,19 +82,33 @@ class NormalMatrix:
         second = csc.indptr[column] + offset % np.maximum(width, 1)
         row_i, row_j = csc.indices[first], csc.indices[second]
         lower = row_i >= row_j
+        self.first, self.second = first[lower].astype(np.int32), second[lower].astype(np.int32)
         self.column = column[lower].astype(np.int32)
-        self.product = csc.data[first[lower]] * csc.data[second[lower]]
-        # CSC order of the lower triangle: by column (j), then row (i); the diagonal always stored.
-        key = np.concatenate([row_j[lower].astype(np.int64) * k + row_i[lower], np.arange(k, dtype=np.int64) * (k + 1)])
-        unique, position = np.unique(key, return_inverse=True)
-        self.position = position[: self.column.size].astype(np.int32)
-        self.diagonal_position = position[self.column.size:]
-        self.size = unique.size
+        # The pattern (with the whole diagonal) from scipy's sparse product, in CSC order; each
+        # product's place in it by a binary search of its (column, row) key.
+        pattern = sp.tril(abs(csc) @ abs(csc).T + sp.identity(k, format="csc"), format="csc")
+        pattern.sort_indices()
+        keys = np.repeat(np.arange(k, dtype=np.int64), np.diff(pattern.indptr)) * k + pattern.indices
+        self.position = np.searchsorted(keys, row_j[lower].astype(np.int64) * k + row_i[lower]).astype(np.int32)
+        self.diagonal_position = np.searchsorted(keys, np.arange(k, dtype=np.int64) * (k + 1))
+        self.size = keys.size
         self.shape = (k, k)
-        self._rows = (unique % k).tolist()
-        self._cols = (unique // k).tolist()
+        self._indptr, self._indices = csc.indptr.copy(), csc.indices.copy()
+        self.product = csc.data[self.first] * csc.data[self.second]
+        self._rows = pattern.indices.tolist()
+        self._cols = (keys // k).tolist()
         self._matrix: Any = None
         self._symbolic: Any = None
+
+    def refresh(self, matrix: sp.spmatrix) -> bool:
+        """Take the values of ``matrix`` if it has the pattern this was built for (then the
+        symbolic factorization is reused). Returns whether it did."""
+        csc = sp.csc_matrix(matrix)
+        if csc.shape[0] != self.shape[0] or not (np.array_equal(csc.indptr, self._indptr)
+                                                 and np.array_equal(csc.indices, self._indices)):
+            return False
+        self.product = csc.data[self.first] * csc.data[self.second]
+        return True
 
     def values(self, w: np.ndarray, d: np.ndarray) -> np.ndarray:
         """The stored (lower-triangle, CSC-ordered) values for these weights."""
@@ -208,6 +225,8 @@ def interior_point(
     tolerance: float = 1e-6,
     max_iterations: int | None = None,
     time_limit: float | None = None,
+    initial: np.ndarray | None = None,
+    warm_shift: float = 1e-2,
 ) -> IterativeSolution:
     """Solve ``min ½‖ỹ‖² s.t. B̃ỹ ≥ b̃, l ≤ ỹ ≤ u`` (module docstring).
 
@@ -240,7 +259,7 @@ def interior_point(
     if np.any(lo > hi):
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
     cap = max_iterations or MAX_ITERATIONS
-    normal = NormalMatrix(B)
+    normal = _normal_matrix(B)
 
     # Start (Mehrotra's heuristic): the least-squares impulses of (B̃B̃ᵀ + I)λ = b̃, ỹ = B̃ᵀλ moved
     # inside the bounds (a hundredth of the interval), then impulses and slacks shifted to be
@@ -248,14 +267,21 @@ def interior_point(
     # unit impulses (docs/performance.md). Infeasible starts are fine: the residuals enter the
     # Newton equations. Bound slacks start at the distance to the bound.
     margin = np.where(has_lo & has_hi, 0.01 * (hi - lo), 0.01)
-    lam0 = normal.factor(np.ones(n), np.ones(k))(b)
-    y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
-    s0 = B @ y - b
-    lam0 = lam0 + max(-1.5 * float(lam0.min(initial=0.0)), 0.0)
-    s0 = s0 + max(-1.5 * float(s0.min(initial=0.0)), 0.0)
-    product = float(lam0 @ s0)
-    lam0 = lam0 + 0.5 * product / max(float(s0.sum()), 1e-300) + 1e-3
-    s0 = s0 + 0.5 * product / max(float(lam0.sum()), 1e-300) + 1e-3
+    if initial is None:
+        lam0 = normal.factor(np.ones(n), np.ones(k))(b)
+        y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
+        s0 = B @ y - b
+        lam0 = lam0 + max(-1.5 * float(lam0.min(initial=0.0)), 0.0)
+        s0 = s0 + max(-1.5 * float(s0.min(initial=0.0)), 0.0)
+        product = float(lam0 @ s0)
+        lam0 = lam0 + 0.5 * product / max(float(s0.sum()), 1e-300) + 1e-3
+        s0 = s0 + 0.5 * product / max(float(lam0.sum()), 1e-300) + 1e-3
+    else:
+        lam0 = np.maximum(np.asarray(initial, dtype=float), 0.0)
+        y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
+        scale = max(1.0, float(lam0.max(initial=0.0)))
+        lam0 = np.maximum(lam0, warm_shift * scale)
+        s0 = np.maximum(B @ y - b, warm_shift)
     x = _Iterate(y=y, s=s0, lam=lam0,
                  p=np.where(has_lo, np.maximum(y - lo, margin), 1.0), q=np.where(has_hi, np.maximum(hi - y, margin), 1.0),
                  alpha=has_lo.astype(float), beta=has_hi.astype(float))
@@ -316,6 +342,18 @@ def _error(x: _Iterate, slack: np.ndarray, lo: np.ndarray, hi: np.ndarray, has_l
 def _result(best: _Iterate, error: float, iteration: int, status: str, start: float) -> IterativeSolution:
     return IterativeSolution(best.y, np.maximum(best.lam, 0.0), iteration, status == "converged", status, error,
                              time.perf_counter() - start)
+
+
+#: The normal matrix of the last problem: the next one reuses it (and its symbolic factorization)
+#: when its matrix has the same pattern (the linearizations of one position-level step).
+_LAST: list[NormalMatrix] = []
+
+
+def _normal_matrix(matrix: sp.csr_matrix) -> NormalMatrix:
+    if _LAST and _LAST[0].refresh(matrix):
+        return _LAST[0]
+    _LAST[:] = [NormalMatrix(matrix)]
+    return _LAST[0]
 
 
 def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
