@@ -65,9 +65,12 @@ def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -
     Separation of an end ``q``: ``d = n·(q − p₀) − ρ`` (negative = overlap, or the cell is on
     the wrong side). A sphere (``l = 0``) has one end. Normal ``n`` (from the plane, body b, to
     the cell, body a); contact point ``q − ρn``; stretch ``±½`` (the ends ride with the tips);
-    kind 5 for the −end (and a sphere), 6 for the +end (:class:`Contacts`).
+    kind 5 for the −end (and a sphere), 6 for the +end (:class:`Contacts`). Fixed cells
+    (``masses = inf``) get none: nothing could move at such a contact (as
+    :func:`~qpcontact.geometry.contacts.candidate_pairs` leaves out pairs of fixed cells).
     """
     parts = []
+    movable = np.isfinite(cells.masses)
     for plane in planes:
         if not isinstance(plane, Plane):
             raise InvalidArgumentError(f"planes: expected qpcontact.geometry.Plane objects, got {type(plane).__name__}")
@@ -76,7 +79,7 @@ def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -
             offset_axis = side * cells.lengths[:, None] * cells.axes
             ends = cells.centers + offset_axis
             separation = (ends - np.asarray(plane.point)) @ normal - cells.radii
-            keep = separation <= margin
+            keep = (separation <= margin) & movable
             if side > 0:
                 keep &= cells.lengths > 0  # a sphere has one end, counted once
             cell = np.flatnonzero(keep)
