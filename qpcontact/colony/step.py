@@ -218,7 +218,7 @@ def step(
         planned, _ = get_solver(defaults["solver"]).plan(defaults["formulation"], defaults["form"])
         keep_separating = planned == "complementarity"
     moving = momenta_before_contact(cells, dt, dynamics, drive, damping)
-    contacts = concatenate([find_contacts(moving, margin, planar=bool(planar)),
+    contacts = concatenate([find_contacts(moving, margin, planar=planar),
                             plane_contacts(moving, planes, margin)])
     candidates = speculative(contacts, dt)
     if keep_separating:

@@ -381,7 +381,7 @@ def narrow_phase(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *, planar
     return evaluate_contacts(cells, *select_contacts(cells, pairs, margin), planar=planar)
 
 
-def find_contacts(cells: Cells, margin: float = 0.0, *, planar: bool = False) -> Contacts:
+def find_contacts(cells: Cells, margin: float = 0.0, *, planar: bool | None = False) -> Contacts:
     """All cell–cell contacts with separation ``d <= margin`` [length] (touching counts):
     :func:`narrow_phase` of :func:`candidate_pairs`.
 
@@ -389,10 +389,13 @@ def find_contacts(cells: Cells, margin: float = 0.0, *, planar: bool = False) ->
         cells: the cells.
         margin: contacts this close count (0: overlapping and touching only) [length].
         planar: the scene is a monolayer in the xy-plane: fallback normals stay in the plane.
+            None: detected from the cells (:meth:`Cells.is_monolayer`), as
+            :func:`qpcontact.resolve` and :func:`qpcontact.step` do with ``planar=None``.
     """
     margin = float(margin)
     if not np.isfinite(margin) or margin < 0:
         raise InvalidArgumentError(f"margin: must be finite and >= 0, got {margin!r}")
+    planar = cells.is_monolayer() if planar is None else bool(planar)
     return narrow_phase(cells, candidate_pairs(cells, margin), margin, planar=planar)
 
 
