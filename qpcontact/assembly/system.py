@@ -29,13 +29,11 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError
-from ..geometry.cells import Cells, perpendicular_basis
+from ..geometry.cells import PLANAR_TOLERANCE, Cells, perpendicular_basis
 from ..geometry.contacts import Contacts
 
 #: Slots of a cell, in order. Their world-frame directions come from :func:`slot_directions`.
 SLOTS = ("tx", "ty", "tz", "spin", "roll1", "roll2", "growth")
-#: Axes and normals with |z| below this count as lying in the xy-plane.
-PLANAR_TOLERANCE = 1e-12
 
 
 def slot_directions(cells: Cells, cell: np.ndarray, slot: np.ndarray) -> np.ndarray:

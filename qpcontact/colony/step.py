@@ -43,8 +43,6 @@ DYNAMICS = ("overdamped", "inertial")
 #: Contacts separating faster than this many times the largest collision are left out
 #: (:func:`drop_fast_separating`).
 SEPARATING_CUTOFF = 10.0
-#: Default ``parallel_sine`` of a step (about 11.5°; see :func:`step`).
-PARALLEL_SINE = 0.2
 
 
 @dataclass
@@ -166,7 +164,6 @@ def step(
     margin: float = 0.0,
     planar: bool | None = None,
     position_correction: float = 0.0,
-    parallel_sine: float = PARALLEL_SINE,
     keep_separating: bool | None = None,
     **resolve_options: Any,
 ) -> StepResult:
@@ -186,11 +183,6 @@ def step(
             the planar unknowns only (an error if it leaves the plane); None: detected.
         position_correction: β in (0, 1] (0 = off): also clear a fraction β of every overlap
             within the step.
-        parallel_sine: pairs whose axes make an angle with a sine below this get two contacts,
-            at the ends of the interval where they lie along each other
-            (:func:`qpcontact.find_contacts`). Over many steps a single contact between two
-            nearly parallel neighbours lets them turn through each other about it, so this
-            default is much larger than the one of ``find_contacts`` (see docs/colony.md).
         keep_separating: put every contact within the margin into the system as soon as one
             collides (see :func:`qpcontact.resolve`), so that pushing one neighbour cannot drive
             it into another it was not approaching (contacts separating faster than
@@ -226,7 +218,7 @@ def step(
         planned, _ = get_solver(defaults["solver"]).plan(defaults["formulation"], defaults["form"])
         keep_separating = planned == "complementarity"
     moving = momenta_before_contact(cells, dt, dynamics, drive, damping)
-    contacts = concatenate([find_contacts(moving, margin, planar=bool(planar), parallel_sine=parallel_sine),
+    contacts = concatenate([find_contacts(moving, margin, planar=planar),
                             plane_contacts(moving, planes, margin)])
     candidates = speculative(contacts, dt)
     if keep_separating:

@@ -5,28 +5,30 @@ The lowest wing: it imports nothing of qpcontact but :mod:`qpcontact.errors`.
 - :mod:`.cells`: :class:`Cells`, N capsules as arrays (positions, shapes, masses, momenta);
 - :mod:`.shapes`: the capsule volume (and mass) and the inertia tensor, one formula each;
 - :mod:`.contacts`: :func:`find_contacts` (KD-tree broad phase, vectorized segment narrow
-  phase), :class:`Contacts`, :func:`colliding` (the contacts to resolve and their ``b``);
+  phase: :func:`select_contacts` then :func:`evaluate_contacts`), :class:`Contacts`,
+  :func:`colliding` (the contacts to resolve and their ``b``);
 - :mod:`.surfaces`: static planes (:class:`Plane`, :func:`substrate`, :func:`channel`) as
   one-sided contacts (:func:`plane_contacts`).
 """
 
 from .cells import Cells, perpendicular_basis
 from .contacts import (
-    PARALLEL_SINE,
     Contacts,
     candidate_pairs,
     colliding,
     concatenate,
+    evaluate_contacts,
     find_contacts,
     narrow_phase,
     relative_normal_velocity,
     required_velocity_change,
+    select_contacts,
 )
 from .shapes import capsule_mass, capsule_volume, inertia_times
 from .surfaces import Plane, channel, plane_contacts, substrate
 
 __all__ = [
-    "PARALLEL_SINE", "Cells", "Contacts", "Plane", "candidate_pairs", "capsule_mass", "capsule_volume", "channel",
-    "colliding", "concatenate", "find_contacts", "inertia_times", "narrow_phase", "perpendicular_basis",
-    "plane_contacts", "relative_normal_velocity", "required_velocity_change", "substrate",
+    "Cells", "Contacts", "Plane", "candidate_pairs", "capsule_mass", "capsule_volume", "channel", "colliding",
+    "concatenate", "evaluate_contacts", "find_contacts", "inertia_times", "narrow_phase", "perpendicular_basis",
+    "plane_contacts", "relative_normal_velocity", "required_velocity_change", "select_contacts", "substrate",
 ]

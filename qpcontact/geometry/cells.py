@@ -21,6 +21,9 @@ from ..errors import InvalidCellsError
 
 #: Largest deviation of ``|â|`` from 1 that is accepted (and then renormalized to the last bit).
 AXIS_UNIT_TOLERANCE = 1e-6
+#: Axes and normals with |z| below this count as lying in the xy-plane; centres whose heights
+#: differ by less than this times the largest radius count as one layer.
+PLANAR_TOLERANCE = 1e-12
 
 
 def _array(name: str, value: Any, n: int, tail: tuple[int, ...]) -> np.ndarray:
@@ -156,6 +159,21 @@ class Cells:
 
     def __len__(self) -> int:
         return self.n
+
+    def is_monolayer(self) -> bool:
+        """All centres at one height z, every axis in the xy-plane, and the motion in it (no
+        momentum along z, no angular momentum about an in-plane axis), to
+        :data:`PLANAR_TOLERANCE`: a scene that the planar reduction can solve, and whose
+        contacts must keep their normals in the plane."""
+        if self.n == 0:
+            return True
+
+        def flat(values: np.ndarray, columns: Any) -> bool:
+            return bool(np.all(np.abs(values[:, columns]) <= PLANAR_TOLERANCE * float(np.max(np.abs(values)))))
+
+        spread = float(np.ptp(self.centers[:, 2]))
+        return (spread <= PLANAR_TOLERANCE * float(np.max(self.radii)) and flat(self.axes, 2)
+                and flat(self.momenta, 2) and flat(self.angular_momenta, slice(0, 2)))
 
     def replace(self, **changes: Any) -> Cells:
         """A new, validated Cells with some arrays replaced (``dataclasses.replace``)."""

@@ -5,9 +5,16 @@ Broad phase: every rod is covered by a few bounding spheres (one per piece of le
 pairs that can touch. This stays O(N log N) for colonies of mixed lengths, where one bounding
 sphere per cell would make a single long rod touch everything.
 
-Narrow phase, vectorized over candidate pairs: the closest points of the two axis segments.
-Nearly parallel rods that lie along each other get two contacts, at the two ends of the
-overlapping interval; otherwise a rod can turn through its neighbour about the single contact.
+Narrow phase, vectorized over candidate pairs, in two parts: :func:`select_contacts` decides
+which contacts a pair gets (its *kinds*: the closest points of the two axis segments, and the
+ends of each segment with their closest points on the other; see :class:`Contacts`), and
+:func:`evaluate_contacts` computes them at the cells' positions. Rods lying side by side get the
+two ends of their overlap (one contact would let them turn through each other about it), skew
+rods the closest point; every contact is a true distance between two axis points, so none
+reports a separation below the pair's true one. No angle threshold is involved.
+
+A pair is a contact when its separation is **at most** the margin: touching capsules (``d = 0``)
+count, with ``margin = 0`` too (as in the broad phase, and as MuJoCo counts them).
 
 Conventions (model.md): the normal ``n`` points from cell b to cell a, the separation is
 ``d = |q_a − q_b| − ρ_a − ρ_b`` (negative = overlap), the relative normal velocity is
@@ -26,8 +33,23 @@ from scipy.spatial import cKDTree
 from ..errors import InvalidArgumentError
 from .cells import Cells, perpendicular_basis
 
-#: Pairs whose axes make an angle with sine below this get two contacts (ends of the overlap).
-PARALLEL_SINE = 1e-3
+#: Contact kinds (:attr:`Contacts.kind`). Between two cells: the closest points of the axis
+#: segments (0); the −/+ end of a's segment and its closest point on b's (1/2); the −/+ end of
+#: b's segment and its closest point on a's (3/4). With a plane: a's −end, or a sphere (5); a's
+#: +end (6).
+CLOSEST, A_MINUS_END, A_PLUS_END, B_MINUS_END, B_PLUS_END, PLANE_MINUS_END, PLANE_PLUS_END = range(7)
+#: Number of kinds a pair of cells can have (0–4).
+PAIR_KINDS = 5
+#: Separations (and end projections) that differ by less than this times ``ρ_a + ρ_b`` count as
+#: equal: rounding.
+ROUNDING = 1e-9
+#: An end contact whose ``s`` and ``t`` both lie within this times ``ρ_a + ρ_b`` of a contact of
+#: the same pair kept before it is a near duplicate and is dropped. ¼, not ½: with ½ the two ends
+#: of a short overlap (rods end to end but offset, a newborn beside its neighbour's pole) merged
+#: into one contact, about which the pair spun (2D colonies to 600 cells, 5 seeds: largest
+#: overlap 0.09–0.15 with ½, 0.055–0.063 with ¼; docs/model-notes.md). Smaller values bring no
+#: further gain and more nearly dependent rows.
+DUPLICATE_DISTANCE = 0.25
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +66,12 @@ class Contacts:
             axis point; for a sphere, ``±½`` towards the contact, see docs/model-notes.md).
         separation: (K,) ``d`` [length]; negative when the capsules overlap.
         normal_velocity: (K,) ``u`` [length/time]; negative when approaching.
+        kind: (K,) int, which contact of its pair it is, so that the same contact can be
+            evaluated again at other positions (:func:`evaluate_contacts`). Cell pairs: 0 the
+            closest points of the two axis segments; 1 / 2 the − / + end of a's axis segment
+            (``s = ∓l_a/2``) and its closest point on b's; 3 / 4 the − / + end of b's segment
+            (``t = ∓l_b/2``) and its closest point on a's. Planes (``cell_b = -1``): 5 a's −end
+            (or a sphere's centre), 6 a's +end.
     """
 
     cell_a: np.ndarray
@@ -55,6 +83,7 @@ class Contacts:
     stretch_b: np.ndarray
     separation: np.ndarray
     normal_velocity: np.ndarray
+    kind: np.ndarray
 
     def __len__(self) -> int:
         return int(self.cell_a.shape[0])
@@ -67,7 +96,7 @@ class Contacts:
     def empty(cls) -> Contacts:
         z1, z3 = np.zeros(0), np.zeros((0, 3))
         zi = np.zeros(0, dtype=np.intp)
-        return cls(zi, zi.copy(), z3, z3, z3, z1, z1, z1, z1)
+        return cls(zi, zi.copy(), z3, z3, z3, z1, z1, z1, z1, zi.copy())
 
 
 def concatenate(parts: list[Contacts]) -> Contacts:
@@ -184,86 +213,190 @@ def _fallback_normals(cells: Cells, a: np.ndarray, b: np.ndarray, planar: bool) 
     return out
 
 
-def narrow_phase(
-    cells: Cells, pairs: np.ndarray, margin: float = 0.0, *, planar: bool = False,
-    parallel_sine: float = PARALLEL_SINE,
-) -> Contacts:
-    """Contacts of the candidate ``pairs`` whose separation is below ``margin``."""
-    if pairs.size == 0:
-        return Contacts.empty()
-    a, b = pairs[:, 0], pairs[:, 1]
-    ax, bx = cells.axes[a], cells.axes[b]
-    ha, hb = 0.5 * cells.lengths[a], 0.5 * cells.lengths[b]
-    r = cells.centers[a] - cells.centers[b]
-    e = np.einsum("ij,ij->i", ax, r)
-    f = np.einsum("ij,ij->i", bx, r)
-    k = np.einsum("ij,ij->i", ax, bx)
-    s, t = _closest_parameters(e, f, k, ha, hb)
+def _end_parameters(kind, e, f, k, ha, hb):
+    """``(s, t, projection)`` of the end kinds 1–4 (see :class:`Contacts`): the end's axial
+    coordinate on its own segment, the clamped projection on the other one, and the unclamped
+    projection (interior when it lies within the other segment)."""
+    sign = np.where(np.asarray(kind) % 2 == 1, -1.0, 1.0)  # kinds 1 and 3 are the − ends
+    on_a = np.asarray(kind) <= 2
+    # An end of a at s = ±ha projects onto b at t = f + s k; an end of b at t = ±hb onto a at
+    # s = −e + t k (the coordinates of the closest point of the other axis line).
+    own = sign * np.where(on_a, ha, hb)
+    projection = np.where(on_a, f, -e) + own * k
+    clamped = np.clip(projection, -np.where(on_a, hb, ha), np.where(on_a, hb, ha))
+    return np.where(on_a, own, clamped), np.where(on_a, clamped, own), projection
 
-    # Nearly parallel rods lying along each other: two contacts, at the ends of the interval of
-    # a's axis that b's axis projects onto.
-    sine2 = np.maximum(0.0, 1.0 - k * k)
-    ends = np.stack([-e - hb * k, -e + hb * k], axis=1)
-    lo = np.maximum(ends.min(axis=1), -ha)
-    hi = np.minimum(ends.max(axis=1), ha)
-    two = (sine2 < parallel_sine**2) & (ha > 0) & (hb > 0) & (hi - lo > 1e-9 * (ha + hb))
-    # Each pair's contacts stay together (the second right after the first, s increasing), so
-    # pairs given in sorted order, as candidate_pairs gives them, need no sort at the end.
-    idx = np.repeat(np.arange(a.size), 1 + two)
-    second = np.zeros(idx.size, dtype=bool)
-    second[np.cumsum(1 + two)[two] - 1] = True
-    s_all = np.where(second, hi[idx], np.where(two, lo, s)[idx])
-    t_all = np.where(second, np.clip(f + hi * k, -hb, hb)[idx], np.where(two, np.clip(f + lo * k, -hb, hb), t)[idx])
-    a, b = a[idx], b[idx]
-    ax, bx = ax[idx], bx[idx]
-    q_a = cells.centers[a] + s_all[:, None] * ax
-    q_b = cells.centers[b] + t_all[:, None] * bx
-    diff = q_a - q_b
+
+def _pair_projections(cells: Cells, a, b):
+    """``r = c_a − c_b``, ``â``, ``b̂``, ``e = â·r``, ``f = b̂·r``, ``k = â·b̂`` and the half lengths."""
+    r = cells.centers[a] - cells.centers[b]
+    ax, bx = cells.axes[a], cells.axes[b]
+    return (r, ax, bx, np.einsum("ij,ij->i", ax, r), np.einsum("ij,ij->i", bx, r), np.einsum("ij,ij->i", ax, bx),
+            0.5 * cells.lengths[a], 0.5 * cells.lengths[b])
+
+
+def _axis_distances(r, ax, bx, s, t) -> np.ndarray:
+    """``|c_a + s â − c_b − t b̂|`` (with ``r = c_a − c_b``) [length]."""
+    return np.linalg.norm(r + s[:, None] * ax - t[:, None] * bx, axis=1)
+
+
+def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which contacts each candidate pair gets: ``(a, b, kind)``, one entry per contact.
+
+    For every pair the five kinds of :class:`Contacts` are considered (the closest points of the
+    two axis segments, and each end of each segment with its closest point on the other). Each
+    is a true distance between a point of a's axis and a point of b's axis, so no contact's
+    separation is below the true separation of the pair, and kind 0 is the true one. Selection:
+
+    - an end kind is a candidate only when both segments have length > 0 and the end projects
+      into the other segment (unclamped, to rounding ``1e-9·(ρ_a + ρ_b)``);
+    - a kind is kept when its separation is at most ``margin`` (touching counts);
+    - kind 0 is dropped when a kept end has the same (to rounding) or a smaller separation: that
+      end represents the minimum (exactly parallel rods thus keep two contacts, not three);
+    - an end is dropped when both its ``s`` and ``t`` lie within ``½(ρ_a + ρ_b)`` of a contact of
+      the same pair kept before it (the one with the smallest separation first): near-duplicate
+      rows make the Delassus operator singular;
+    - a pair within the margin left with nothing keeps kind 0.
+
+    Rods lying side by side thus get the two ends of their overlap (they cannot turn through
+    each other about one point); skew rods the crossing point plus any end within the margin.
+    No angle threshold; the only lengths are the cells' own radii.
+
+    Args:
+        cells: the cells.
+        pairs: (P, 2) candidate pairs (e.g. :func:`candidate_pairs`).
+        margin: largest separation that counts [length].
+
+    Returns:
+        ``(a, b, kind)``, int arrays, ordered by pair ``(a, b)`` and then by the axial coordinate
+        ``s`` on a (ties by kind): the order of the contacts :func:`evaluate_contacts` returns.
+    """
+    pairs = np.asarray(pairs, dtype=np.intp).reshape(-1, 2)
+    if pairs.shape[0] == 0:
+        empty = np.zeros(0, dtype=np.intp)
+        return empty, empty.copy(), empty.copy()
+    a, b = pairs[:, 0], pairs[:, 1]
+    r, ax, bx, e, f, k, ha, hb = _pair_projections(cells, a, b)
+    rho = cells.radii[a] + cells.radii[b]
+    s0, t0 = _closest_parameters(e, f, k, ha, hb)
+    separation0 = _axis_distances(r, ax, bx, s0, t0) - rho
+    # No contact of a pair is nearer than kind 0: pairs beyond the margin are done.
+    within = np.flatnonzero(separation0 <= margin)
+    a, b, r, ax, bx, e, f, k, ha, hb, rho = (x[within] for x in (a, b, r, ax, bx, e, f, k, ha, hb, rho))
+    rounding = ROUNDING * rho
+    rods = (ha > 0) & (hb > 0)
+    s = np.empty((a.size, PAIR_KINDS))
+    t = np.empty_like(s)
+    separation = np.full_like(s, np.inf)
+    s[:, 0], t[:, 0], separation[:, 0] = s0[within], t0[within], separation0[within]
+    for kind in range(1, PAIR_KINDS):
+        s[:, kind], t[:, kind], projection = _end_parameters(kind, e, f, k, ha, hb)
+        other = hb if kind <= 2 else ha
+        rows = np.flatnonzero(rods & (np.abs(projection) <= other + rounding))
+        separation[rows, kind] = _axis_distances(r[rows], ax[rows], bx[rows], s[rows, kind], t[rows, kind]) - rho[rows]
+    keep = separation <= margin
+    # Kind 0 is represented by the nearest kept end when that end is as close (to rounding).
+    ends = np.where(keep[:, 1:], separation[:, 1:], np.inf)
+    nearest_end = 1 + np.argmin(ends, axis=1)
+    represented = ends.min(axis=1) <= separation[:, 0] + rounding
+    keep[:, 0] &= ~represented
+    # Near duplicates, in the order: the contact of least separation (kind 0 or the end that
+    # represents it) first, then the other ends by kind.
+    order = np.tile(np.arange(PAIR_KINDS), (a.size, 1))
+    swap = np.flatnonzero(represented)
+    order[swap, 0], order[swap, nearest_end[swap]] = nearest_end[swap], 0
+    rows = np.arange(a.size)[:, None]
+    s_o, t_o, keep_o = s[rows, order], t[rows, order], keep[rows, order]
+    near = DUPLICATE_DISTANCE * rho
+    for j in range(1, PAIR_KINDS):
+        for i in range(j):
+            duplicate = keep_o[:, i] & (np.abs(s_o[:, j] - s_o[:, i]) <= near) & (np.abs(t_o[:, j] - t_o[:, i]) <= near)
+            keep_o[:, j] &= ~duplicate
+    keep[rows, order] = keep_o
+    keep[:, 0] |= (separation[:, 0] <= margin) & ~keep.any(axis=1)
+    # Contacts ordered by pair, then along a (ties by kind: a stable sort of kinds 0..4).
+    along = np.argsort(np.where(keep, s, np.inf), axis=1, kind="stable")
+    kinds = along[keep[rows, along]]
+    row = np.repeat(np.arange(a.size), keep.sum(axis=1))
+    a_out, b_out = a[row], b[row]
+    key = a_out.astype(np.int64) * max(cells.n, 1) + b_out
+    if np.any(key[1:] < key[:-1]):
+        order_all = np.lexsort((kinds, s[row, kinds], b_out, a_out))
+        a_out, b_out, kinds = a_out[order_all], b_out[order_all], kinds[order_all]
+    return a_out, b_out, kinds.astype(np.intp)
+
+
+def evaluate_contacts(cells: Cells, a: np.ndarray, b: np.ndarray, kind: np.ndarray, *, planar: bool = False) -> Contacts:
+    """The contacts ``(a, b, kind)`` (e.g. from :func:`select_contacts`) at the cells' current
+    positions, in the order given, whatever their separation.
+
+    Kind 0 is the closest points of the two axis segments; an end kind (1–4, see
+    :class:`Contacts`) is that end and its closest point on the other segment (clamped, even if
+    the end no longer projects inside it). Normals point from b to a; where the two axis points
+    coincide (crossing or coincident axes) the fallback of :func:`_fallback_normals` is used.
+
+    Args:
+        cells: the cells (positions, momenta).
+        a, b: (K,) cell indices (``a != b``).
+        kind: (K,) contact kinds, 0–4.
+        planar: the scene is a monolayer in the xy-plane: fallback normals stay in the plane.
+    """
+    a, b, kind = (np.asarray(x) for x in (a, b, kind))
+    if not (a.shape == b.shape == kind.shape and a.ndim == 1):
+        raise InvalidArgumentError(f"a, b, kind: expected three 1-D arrays of one length, got shapes "
+                                   f"{a.shape}, {b.shape}, {kind.shape}")
+    for name, values, high in (("a", a, cells.n), ("b", b, cells.n), ("kind", kind, PAIR_KINDS)):
+        if values.size and (values.dtype.kind not in "iu" or values.min() < 0 or values.max() >= high):
+            raise InvalidArgumentError(f"{name}: expected integers in [0, {high}), got {values.dtype} in "
+                                       f"[{values.min()}, {values.max()}]")
+    if np.any(a == b):
+        raise InvalidArgumentError(f"a, b: a cell cannot touch itself (cell {int(a[a == b][0])})")
+    a, b, kind = a.astype(np.intp), b.astype(np.intp), kind.astype(np.intp)
+    if a.size == 0:
+        return Contacts.empty()
+    r, ax, bx, e, f, k, ha, hb = _pair_projections(cells, a, b)
+    s, t = _end_parameters(np.maximum(kind, 1), e, f, k, ha, hb)[:2]
+    closest = np.flatnonzero(kind == 0)
+    s[closest], t[closest] = _closest_parameters(e[closest], f[closest], k[closest], ha[closest], hb[closest])
+    diff = r + s[:, None] * ax - t[:, None] * bx
     dist = np.linalg.norm(diff, axis=1)
     rho_a, rho_b = cells.radii[a], cells.radii[b]
     separation = dist - rho_a - rho_b
-    keep = separation < margin
-    a, b, ax, bx, s_all, t_all = a[keep], b[keep], ax[keep], bx[keep], s_all[keep], t_all[keep]
-    diff, dist, separation = diff[keep], dist[keep], separation[keep]
-    rho_a, rho_b = rho_a[keep], rho_b[keep]
-
     degenerate = dist <= 1e-12 * (rho_a + rho_b)
     with np.errstate(invalid="ignore", divide="ignore"):
         normal = diff / dist[:, None]
     if degenerate.any():
         normal[degenerate] = _fallback_normals(cells, a[degenerate], b[degenerate], planar)
-    offset_a = s_all[:, None] * ax - rho_a[:, None] * normal
-    offset_b = t_all[:, None] * bx + rho_b[:, None] * normal
-    stretch_a = stretch_of(s_all, cells.lengths[a], ax, offset_a)
-    stretch_b = stretch_of(t_all, cells.lengths[b], bx, offset_b)
+    offset_a = s[:, None] * ax - rho_a[:, None] * normal
+    offset_b = t[:, None] * bx + rho_b[:, None] * normal
+    stretch_a = stretch_of(s, cells.lengths[a], ax, offset_a)
+    stretch_b = stretch_of(t, cells.lengths[b], bx, offset_b)
     u = relative_normal_velocity(cells, a, b, normal, offset_a, offset_b, stretch_a, stretch_b)
-    found = Contacts(a, b, normal, offset_a, offset_b, stretch_a, stretch_b, separation, u)
-    # Deterministic order: by pair, then along a. Sorted input pairs already give it.
-    key = a.astype(np.int64) * cells.n + b
-    same = key[1:] == key[:-1]
-    if np.all(key[1:] >= key[:-1]) and np.all(s_all[1:][same] > s_all[:-1][same]):
-        return found
-    return found.subset(np.lexsort((s_all, b, a)))
+    return Contacts(a, b, normal, offset_a, offset_b, stretch_a, stretch_b, separation, u, kind)
 
 
-def find_contacts(
-    cells: Cells, margin: float = 0.0, *, planar: bool = False, parallel_sine: float = PARALLEL_SINE
-) -> Contacts:
-    """All cell–cell contacts with separation ``d < margin`` [length].
+def narrow_phase(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *, planar: bool = False) -> Contacts:
+    """Contacts of the candidate ``pairs`` with separation at most ``margin``:
+    :func:`evaluate_contacts` of :func:`select_contacts`."""
+    return evaluate_contacts(cells, *select_contacts(cells, pairs, margin), planar=planar)
+
+
+def find_contacts(cells: Cells, margin: float = 0.0, *, planar: bool | None = False) -> Contacts:
+    """All cell–cell contacts with separation ``d <= margin`` [length] (touching counts):
+    :func:`narrow_phase` of :func:`candidate_pairs`.
 
     Args:
         cells: the cells.
-        margin: contacts closer than this count (0: overlapping only) [length].
+        margin: contacts this close count (0: overlapping and touching only) [length].
         planar: the scene is a monolayer in the xy-plane: fallback normals stay in the plane.
-        parallel_sine: sine of the angle below which two rods lying along each other get two
-            contacts.
+            None: detected from the cells (:meth:`Cells.is_monolayer`), as
+            :func:`qpcontact.resolve` and :func:`qpcontact.step` do with ``planar=None``.
     """
     margin = float(margin)
     if not np.isfinite(margin) or margin < 0:
         raise InvalidArgumentError(f"margin: must be finite and >= 0, got {margin!r}")
-    if not 0 <= parallel_sine < 1:
-        raise InvalidArgumentError(f"parallel_sine: must be in [0, 1), got {parallel_sine!r}")
-    return narrow_phase(cells, candidate_pairs(cells, margin), margin, planar=planar, parallel_sine=parallel_sine)
+    planar = cells.is_monolayer() if planar is None else bool(planar)
+    return narrow_phase(cells, candidate_pairs(cells, margin), margin, planar=planar)
 
 
 def required_velocity_change(

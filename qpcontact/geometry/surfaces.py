@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import InvalidArgumentError
 from .cells import Cells
-from .contacts import Contacts, concatenate, relative_normal_velocity
+from .contacts import PLANE_MINUS_END, PLANE_PLUS_END, Contacts, concatenate, relative_normal_velocity
 
 
 @dataclass(frozen=True)
@@ -59,13 +59,18 @@ def channel(width: float, center_y: float = 0.0) -> list[Plane]:
 
 
 def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -> Contacts:
-    """Contacts of the cells' axis ends with each plane whose separation is below ``margin``.
+    """Contacts of the cells' axis ends with each plane whose separation is at most ``margin``
+    (touching counts, as between cells).
 
     Separation of an end ``q``: ``d = n·(q − p₀) − ρ`` (negative = overlap, or the cell is on
     the wrong side). A sphere (``l = 0``) has one end. Normal ``n`` (from the plane, body b, to
-    the cell, body a); contact point ``q − ρn``; stretch ``±½`` (the ends ride with the tips).
+    the cell, body a); contact point ``q − ρn``; stretch ``±½`` (the ends ride with the tips);
+    kind 5 for the −end (and a sphere), 6 for the +end (:class:`Contacts`). Fixed cells
+    (``masses = inf``) get none: nothing could move at such a contact (as
+    :func:`~qpcontact.geometry.contacts.candidate_pairs` leaves out pairs of fixed cells).
     """
     parts = []
+    movable = np.isfinite(cells.masses)
     for plane in planes:
         if not isinstance(plane, Plane):
             raise InvalidArgumentError(f"planes: expected qpcontact.geometry.Plane objects, got {type(plane).__name__}")
@@ -74,7 +79,7 @@ def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -
             offset_axis = side * cells.lengths[:, None] * cells.axes
             ends = cells.centers + offset_axis
             separation = (ends - np.asarray(plane.point)) @ normal - cells.radii
-            keep = separation < margin
+            keep = (separation <= margin) & movable
             if side > 0:
                 keep &= cells.lengths > 0  # a sphere has one end, counted once
             cell = np.flatnonzero(keep)
@@ -85,5 +90,6 @@ def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -
             static = np.full(k, -1, dtype=np.intp)
             zeros3, zeros1 = np.zeros((k, 3)), np.zeros(k)
             u = relative_normal_velocity(cells, cell, static, normals, offset_a, zeros3, stretch_a, zeros1)
-            parts.append(Contacts(cell, static, normals, offset_a, zeros3, stretch_a, zeros1, separation[cell], u))
+            kind = np.full(k, PLANE_PLUS_END if side > 0 else PLANE_MINUS_END, dtype=np.intp)
+            parts.append(Contacts(cell, static, normals, offset_a, zeros3, stretch_a, zeros1, separation[cell], u, kind))
     return concatenate(parts)

@@ -226,7 +226,8 @@ def resolve(
         contacts: precomputed contacts (e.g. cell–cell plus cell–plane); found from ``cells`` if
             None.
         reduce: leave out unknowns the scene does not need (default True).
-        planar: force (True) or forbid (False) the planar reduction; None detects it.
+        planar: force (True) or forbid (False) the planar reduction; None detects it, for the
+            detection of contacts (:meth:`Cells.is_monolayer`) and for the system alike.
         scale: nondimensionalize the system (default; see :mod:`qpcontact.assembly.system`). ``False``
             hands the solvers the system in the caller's units (for measurements only).
         time_limit: seconds the solver may take, where the backend supports it.
@@ -253,7 +254,9 @@ def resolve(
     solved, solved_form = _check_options(solver, formulation, form, tolerance, time_limit, on_failure)
     t_start = time.perf_counter()
     if contacts is None:
-        contacts = find_contacts(cells, margin, planar=bool(planar))
+        # Detection gets the planar decision the system will make (issue 13, item 2): a
+        # monolayer's crossing axes must not get the out-of-plane normal â × b̂.
+        contacts = find_contacts(cells, margin, planar=planar)
     if keep_separating and solved != "complementarity":
         raise InvalidArgumentError("keep_separating needs a QP solver with formulation='complementarity' "
                                    f"(got solver {solver!r}, formulation {formulation!r})")

@@ -89,8 +89,8 @@ def reference_solution(system: ContactSystem, formulation: str, *, tolerance: fl
     """A high-accuracy ``ỹ*`` for a formulation: the linear solve for the plain problem
     (``"linear"``) and wherever it already satisfies the formulation's optimality conditions
     (all contacts active), else Clarabel at ``tolerance`` followed by an exact active-set polish
-    that is kept only if it verifies (feasible, and for complementarity, non-negative contact
-    impulses).
+    (of Clarabel's contact impulses, else of MPRGP's) that is kept only if it verifies (feasible,
+    and for complementarity, non-negative contact impulses).
 
     ``guess``: contact impulses ``λ̃`` from a faster solve (complementarity only). If the polish of
     their active set verifies (:func:`active_set_polish`), that exact optimum is returned and the
@@ -111,4 +111,10 @@ def reference_solution(system: ContactSystem, formulation: str, *, tolerance: fl
     if formulation != "complementarity" or out.lam is None:
         return out.y  # least_squares: Clarabel's answer (its r ≥ 0 part has no simple active-set polish)
     polished = active_set_polish(system, out.lam)
+    if polished is None:
+        # Redundant contacts (side-by-side rods in a loop: Ã singular to 1e-6) leave the contact
+        # impulses non-unique; an interior point spreads them, so its active set may not verify,
+        # while MPRGP's vertex-like answer does.
+        second = solve(Problem.of(system), "mprgp", formulation, "contact", tolerance=min(tolerance, 1e-12))
+        polished = active_set_polish(system, second.lam) if second.lam is not None else None
     return out.y if polished is None else polished

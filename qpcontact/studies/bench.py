@@ -59,8 +59,11 @@ from ..solvers import available_solvers, get_solver, solve_min_norm
 from . import scenes
 
 #: Solver specs ``name[/form][@tolerance]`` timed by default: the floor (LU and LSMR), the
-#: baseline, and the QP solvers.
-DEFAULT_SOLVERS = ("linear", "linear/primal", "cg@1e-8", "mprgp", "osqp/contact", "osqp/primal", "clarabel/primal@1e-9")
+#: baseline, and the QP solvers. MPRGP at 1e-7: at 1e-6 its answer on the 3D 300-cell snapshot
+#: (rods side by side with two contacts each since issue 13) is 1.0e-6 from the reference, on
+#: the edge of the target.
+DEFAULT_SOLVERS = ("linear", "linear/primal", "cg@1e-8", "mprgp@1e-7", "osqp/contact", "osqp/primal",
+                   "clarabel/primal@1e-9")
 #: The relative error every answer must reach (issue 6).
 TARGET_ERROR = 1e-6
 MARK_START, MARK_END = "<!-- bench:start -->", "<!-- bench:end -->"

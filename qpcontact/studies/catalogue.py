@@ -25,7 +25,8 @@ from functools import partial
 
 import numpy as np
 
-from ..geometry import Cells, Contacts, capsule_volume, concatenate, find_contacts
+from ..geometry import Cells, Contacts, capsule_volume, concatenate, evaluate_contacts, find_contacts
+from ..geometry.contacts import A_PLUS_END, B_MINUS_END
 from .scenes import Scene, register_scene
 
 #: Default radius and length of a rod [length units of the scene].
@@ -327,6 +328,13 @@ def near_duplicate(seed: int, *, interval: float = 1e-8) -> Cells:
     return _cells(centers, axes, LENGTH, RADIUS, 1.0, velocities)
 
 
+def overlap_end_contacts(cells: Cells) -> Contacts:
+    """The two contacts at the ends of the overlap of the two rods of :func:`near_duplicate` (b's
+    −end, a's +end), both kept: :func:`~qpcontact.geometry.select_contacts` would drop one of
+    them as a near duplicate, and this case is there to show what solvers make of such rows."""
+    return evaluate_contacts(cells, np.array([0, 0]), np.array([1, 1]), np.array([B_MINUS_END, A_PLUS_END]))
+
+
 def duplicated_contacts(cells: Cells) -> Contacts:
     """Every contact of the scene twice (redundant rows of M: a singular Delassus operator)."""
     found = find_contacts(cells)
@@ -381,7 +389,7 @@ def _catalogue() -> list[Scene]:
     add(Scene("duplicate_contacts", "duplicate", "a 25-rod heap with every contact listed twice",
              random_cluster, contacts=duplicated_contacts))
     add(Scene("near_duplicate", "duplicate", "two parallel rods whose two end contacts are 1e-8 length apart",
-             near_duplicate))
+             near_duplicate, contacts=overlap_end_contacts))
     return cases
 
 

@@ -55,7 +55,7 @@ def system_row(cell, sigma, e, n):
     """nᵀM_r p computed by qpcontact (a contact of the cell with a static body, normal n)."""
     offset = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
     contacts = Contacts(np.array([0]), np.array([-1]), n[None], offset[None], np.zeros((1, 3)),
-                        np.array([sigma]), np.zeros(1), np.array([-0.1]), np.array([-1.0]))
+                        np.array([sigma]), np.zeros(1), np.array([-0.1]), np.array([-1.0]), np.array([5]))
     system = build_system(cell, contacts, np.array([1.0]), reduce=False)
     y = system.from_impulses(cell.generalized_momenta())
     return float((system.matrix @ y)[0] * system.velocity_scale)
@@ -80,7 +80,7 @@ def test_seed_closed_form_normal_equation_block_is_not_MtM():
     cell = random_cell(rng)
     n = np.array([0.6, 0.8, 0.0])
     contacts = Contacts(np.array([0]), np.array([-1]), n[None], np.array([[0.1, 0.2, 0.3]]), np.zeros((1, 3)),
-                        np.array([0.1]), np.zeros(1), np.array([-0.1]), np.array([-1.0]))
+                        np.array([0.1]), np.zeros(1), np.array([-0.1]), np.array([-1.0]), np.array([5]))
     system = build_system(cell, contacts, np.array([1.0]), reduce=False)
     # Unscale to physical M in the slot basis (translation slots are world x, y, z).
     m_row = system.matrix.toarray()[0] * system.operator_scale * np.sqrt(system.column_inverse_mass)

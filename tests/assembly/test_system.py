@@ -71,8 +71,9 @@ def test_unknown_counts_follow_the_scene():
 @pytest.mark.parametrize("seed", range(3))
 def test_planar_scene_solved_as_planar_and_as_3d_gives_the_same_impulses(solver, seed):
     cells = random_scene(seed, n_cells=40, planar=True)
-    planar = qc.resolve(cells, solver=solver, tolerance=1e-8)
-    spatial = qc.resolve(cells, solver=solver, tolerance=1e-8, planar=False)
+    contacts = qc.find_contacts(cells, planar=True)  # the same contacts (in-plane normals) for both
+    planar = qc.resolve(cells, solver=solver, tolerance=1e-8, contacts=contacts)
+    spatial = qc.resolve(cells, solver=solver, tolerance=1e-8, planar=False, contacts=contacts)
     assert planar.planar and not spatial.planar
     assert planar.n_unknowns < spatial.n_unknowns
     scale = np.max(np.abs(spatial.impulses))

@@ -74,16 +74,45 @@ def test_parallel_rods_end_to_end_get_one_contact_along_the_axis():
 def test_crossing_axes_fall_back_to_the_cross_product():
     cells = rods([[0, 0, 0], [0, 0, 0]], [[1, 0, 0], [0, 1, 0]], [2.0, 2.0])
     c = qc.find_contacts(cells)
-    assert len(c) == 1
-    assert np.allclose(np.abs(c.normal[0]), [0, 0, 1])
-    assert c.separation[0] == pytest.approx(-1.0)
+    crossing = c.kind == 0
+    assert np.count_nonzero(crossing) == 1
+    assert np.allclose(np.abs(c.normal[crossing][0]), [0, 0, 1])
+    assert c.separation[crossing][0] == pytest.approx(-1.0)
     assert np.all(np.isfinite(c.offset_a))
+    # The four ends lie exactly one diameter from the other axis: touching, so they count too.
+    assert sorted(c.kind[~crossing]) == [1, 2, 3, 4] and np.all(c.separation[~crossing] == 0.0)
 
 
 def test_crossing_axes_in_a_planar_scene_keep_the_normal_in_the_plane():
     cells = rods([[0.1, 0.2, 0], [0, 0, 0]], [[1, 0, 0], [0, 1, 0]], [2.0, 2.0])
     c = qc.find_contacts(cells, planar=True)
     assert len(c) >= 1 and np.all(c.normal[:, 2] == 0)
+    assert np.array_equal(qc.find_contacts(cells, planar=None).normal, c.normal)  # detected: a monolayer
+    assert np.abs(qc.find_contacts(cells).normal[:, 2]).max() == 1.0  # not planar (default): â × b̂
+
+
+@pytest.mark.parametrize("height", [0.0, 7.5])
+def test_crossing_axes_in_a_monolayer_collide_without_planar_true(height):
+    """Issue 13, item 2: resolve(planar=None) detected the planar reduction only after detection
+    had given the crossing the out-of-plane normal â × b̂, along which nothing approaches: no
+    contact at all. Detection now makes the same decision as the system."""
+    cells = rods([[0.1, 0.2, height], [0, 0, height]], [[1, 0, 0], [0, 1, 0]], [2.0, 2.0],
+                 momenta=[[-1.0, -1.0, 0], [0, 0, 0]])
+    assert cells.is_monolayer() and not cells.replace(centers=[[0.1, 0.2, height], [0, 0, height + 1e-6]]).is_monolayer()
+    assert not cells.replace(axes=[[1, 0, 1e-6], [0, 1, 0]], normalize_axes=True).is_monolayer()
+    detected = qc.resolve(cells, planar=None, solver="clarabel")
+    forced = qc.resolve(cells, planar=True, solver="clarabel")
+    assert len(detected.contacts) == len(forced.contacts) == 1 and detected.planar
+    np.testing.assert_array_equal(detected.contacts.normal, forced.contacts.normal)
+    np.testing.assert_allclose(detected.impulses, forced.impulses, atol=1e-9)
+    stepped = qc.step(cells, 0.01, dynamics="inertial", solver="clarabel")
+    crossing = stepped.result.contacts.kind == 0
+    assert np.count_nonzero(crossing) == 1 and stepped.result.planar
+    np.testing.assert_array_equal(stepped.result.contacts.normal[crossing], forced.contacts.normal)
+    # Moving out of the plane is not a monolayer: the crossing keeps â × b̂.
+    lifting = cells.replace(momenta=[[0, 0, -1.0], [0, 0, 1.0]])
+    assert not lifting.is_monolayer()
+    np.testing.assert_allclose(np.abs(qc.resolve(lifting, solver="clarabel").contacts.normal[0]), [0, 0, 1])
 
 
 def test_coincident_rods_get_a_normal_perpendicular_to_the_axis():

@@ -70,3 +70,19 @@ def test_fixed_cell_does_not_move_and_stops_its_neighbour():
         cells = out.cells
     np.testing.assert_array_equal(cells.centers[0], [0, 0, 0])
     assert cells.centers[1, 1] == pytest.approx(1.0, abs=1e-3)
+
+
+@pytest.mark.parametrize("height, correction", [(0.5, 0.0), (0.3, 0.5)])
+def test_a_fixed_cell_on_a_plane_does_not_stop_the_step(height, correction):
+    """Issue 13, item 3: a fixed cell touching (or, with position correction, overlapping) the
+    substrate made every step with a collision elsewhere raise "has no movable degree of
+    freedom": its plane contact was kept though nothing can move there."""
+    cells = q.Cells(centers=[[0, 0, height], [5, 0, 0.5], [5, 0, 1.45]], axes=[1, 0, 0], lengths=2.0, radii=0.5,
+                    masses=[np.inf, 1.0, 1.0])
+    assert 0 not in plane_contacts(cells, [substrate()]).cell_a
+    drive = np.zeros((3, 7))
+    drive[2, 2] = -1.0  # cell 2 pushed down onto cell 1, which rests on the substrate
+    out = step(cells, 0.01, drive=drive, planes=[substrate()], margin=0.2, position_correction=correction,
+               solver="clarabel")
+    assert out.result.converged and len(out.result.contacts) >= 1
+    np.testing.assert_array_equal(out.cells.centers[0], cells.centers[0])

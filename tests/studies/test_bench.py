@@ -15,7 +15,7 @@ def test_quick_bench_writes_the_table_plot_and_data(tmp_path):
     (out).mkdir()
     (out / "performance.md").write_text("# Performance\n\nanalysis kept\n\n<!-- bench:start -->\nold\n<!-- bench:end -->\ntail kept\n")
     code = bench.main(["--quick", "--out-dir", str(out), "--cache-dir", "none", "--repeats", "1",
-                       "--solvers", "linear", "linear/primal", "cg@1e-9", "mprgp", "osqp/contact"])
+                       "--solvers", "linear", "linear/primal", "cg@1e-9", "mprgp@1e-7", "osqp/contact"])
     assert code == 0
     text = (out / "performance.md").read_text()
     assert "analysis kept" in text and "tail kept" in text and "\nold\n" not in text
@@ -30,7 +30,7 @@ def test_quick_bench_writes_the_table_plot_and_data(tmp_path):
             assert row["verified"], (record["dimensions"], record["cells"], spec, row)
         # The plain solvers are checked against the linear solve, the QP solvers against the QP.
         assert {spec: row["reference"] for spec, row in record["solvers"].items()} == {
-            "linear": "linear", "linear/primal": "linear", "cg@1e-9": "linear", "mprgp": "complementarity",
+            "linear": "linear", "linear/primal": "linear", "cg@1e-9": "linear", "mprgp@1e-7": "complementarity",
             "osqp/contact": "complementarity"}
         assert record["solvers"]["linear/primal"]["status"].startswith("solved (lsmr")
 

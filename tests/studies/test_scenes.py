@@ -75,7 +75,7 @@ def test_colony_contact_counts_are_those_of_a_dense_packing(generator):
     cells = generator(3000, seed=2)
     contacts = find_contacts(cells)
     per_cell = len(contacts) / cells.n
-    assert 1.5 <= per_cell <= 4.5, per_cell
+    assert 1.5 <= per_cell <= 5.5, per_cell  # rods side by side count two contacts
     active, _ = colliding(contacts)
     assert 0.3 * len(contacts) <= len(active) <= 0.9 * len(contacts)
     # Every cell touches something (no isolated cells inside the colony's packing), nearly.
