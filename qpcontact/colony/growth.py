@@ -27,13 +27,15 @@ break the symmetry of a perfect chain, and may draw its own growth rate (``rate_
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..errors import InvalidArgumentError
-from ..geometry import Cells, capsule_volume
+from ..geometry import Cells, Plane, capsule_volume
+from .position import PositionSettings, PositionStepResult, position_step
 from .step import StepResult, rotate, step
 
 
@@ -184,9 +186,21 @@ def divide(colony: Colony, division_length: float, rng: np.random.Generator, *,
     )
 
 
+def _grown(colony: Colony, before: Cells, after: Cells, paid: np.ndarray, dt: float) -> Colony:
+    """The colony after a growth step that took ``before`` to ``after``: masses and growth
+    inertias grown with the volume including what is owed (constant density), the owed length
+    reduced by what was paid, the time advanced."""
+    owed = colony.owed - paid
+    area = np.pi * before.radii**2
+    swell = (volumes(after) + area * owed) / (volumes(before) + area * colony.owed)
+    after = after.replace(masses=after.masses * swell, growth_inertia=after.growth_inertia * swell)
+    return colony.replace(cells=after, owed=owed, time=colony.time + dt)
+
+
 def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.ndarray | None = None,
          **step_options: Any) -> tuple[Colony, StepResult]:
-    """One growth step (no division; call :func:`divide` after it).
+    """One growth step with the velocity-level :func:`qpcontact.colony.step` (no division; call
+    :func:`divide` after it).
 
     The growth drive (:func:`growth_drive` of :func:`growth_step`) enters as the growth momentum
     — overdamped, as the growth column of ``drive``; inertial, by setting ``g`` (growth is a
@@ -209,11 +223,47 @@ def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.n
             drive = np.array(drive, dtype=float, copy=True)
             drive[:, 6] = 0.0
     out = step(cells, dt, dynamics=dynamics, drive=drive, **step_options)
-    owed = colony.owed - paid
-    area = np.pi * cells.radii**2
-    swell = (volumes(out.cells) + area * owed) / (volumes(cells) + area * colony.owed)
-    out.cells = out.cells.replace(masses=out.cells.masses * swell, growth_inertia=out.cells.growth_inertia * swell)
-    return colony.replace(cells=out.cells, owed=owed, time=colony.time + dt), out
+    grown = _grown(colony, cells, out.cells, paid, dt)
+    out.cells = grown.cells
+    return grown, out
+
+
+def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None, planes: Sequence[Plane] = (),
+                  planar: bool | None = None, settings: PositionSettings | None = None,
+                  on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
+    """One growth step with the position-level :func:`qpcontact.colony.position_step`
+    (overdamped; no division: call :func:`divide` after it).
+
+    The growth drive of :func:`growth_step` is the growth column of ``drive`` (user-given
+    momenta in the other columns); after the step, masses and growth inertias grow with the
+    volume as in :func:`grow`. A step that does not converge is not applied: it raises
+    :class:`~qpcontact.errors.StepFailedError` (``on_failure="raise"``) or returns the colony
+    unchanged with the unconverged result (``on_failure="return"``).
+    """
+    cells = colony.cells
+    increase, paid = growth_step(colony, dt)
+    full = np.zeros((cells.n, 7)) if drive is None else np.array(drive, dtype=float, copy=True)
+    if full.shape != (cells.n, 7):
+        raise InvalidArgumentError(f"drive: expected shape ({cells.n}, 7) (p, L, g per cell), got {full.shape}")
+    full[:, 6] = growth_drive(cells, increase, dt)
+    out = position_step(cells, dt, drive=full, planes=planes, planar=planar, settings=settings, on_failure=on_failure)
+    if not out.converged:
+        return colony, out
+    grown = _grown(colony, cells, out.cells, paid, dt)
+    out.cells = grown.cells
+    return grown, out
+
+
+def growth_time_step(colony: Colony, *, growth_per_step: float = 0.035, max_dt: float = np.inf) -> float:
+    """A time step in which the fastest-growing cell lengthens by ``growth_per_step`` of its
+    length (``dt = ln(1 + g)/max rate``), at most ``max_dt``: the step is set by growth, not by
+    the size of the colony (newborn cells paying the length owed at division grow up to twice as
+    fast). Raises :class:`~qpcontact.errors.InvalidArgumentError` for a growth per step that is
+    not a finite number > 0."""
+    if isinstance(growth_per_step, bool) or not (np.isfinite(growth_per_step) and growth_per_step > 0):
+        raise InvalidArgumentError(f"growth_per_step: must be a finite number > 0, got {growth_per_step!r}")
+    rate = float(colony.rates.max(initial=0.0))
+    return float(max_dt) if rate <= 0 else min(float(max_dt), float(np.log1p(growth_per_step)) / rate)
 
 
 def expansion_time_step(colony: Colony, *, max_dt: float, cfl: float = 0.2, dimensions: int = 2) -> float:

@@ -25,10 +25,10 @@ from .contacts import (
     select_contacts,
 )
 from .shapes import capsule_mass, capsule_volume, inertia_times
-from .surfaces import Plane, channel, plane_contacts, substrate
+from .surfaces import Plane, channel, evaluate_plane_contacts, plane_contacts, substrate
 
 __all__ = [
-    "Cells", "Contacts", "Plane", "candidate_pairs", "capsule_mass", "capsule_volume", "channel", "colliding",
+    "Cells", "Contacts", "Plane", "candidate_pairs", "capsule_mass", "capsule_volume", "channel", "evaluate_plane_contacts", "colliding",
     "concatenate", "evaluate_contacts", "find_contacts", "inertia_times", "narrow_phase", "perpendicular_basis",
     "plane_contacts", "relative_normal_velocity", "required_velocity_change", "select_contacts", "substrate",
 ]

@@ -240,7 +240,8 @@ def _axis_distances(r, ax, bx, s, t) -> np.ndarray:
     return np.linalg.norm(r + s[:, None] * ax - t[:, None] * bx, axis=1)
 
 
-def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *,
+                    always_closest: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which contacts each candidate pair gets: ``(a, b, kind)``, one entry per contact.
 
     For every pair the five kinds of :class:`Contacts` are considered (the closest points of the
@@ -262,10 +263,17 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0) -> tup
     each other about one point); skew rods the crossing point plus any end within the margin.
     No angle threshold; the only lengths are the cells' own radii.
 
+    With ``always_closest`` (the position-level step), kind 0 is kept whenever the pair is within
+    the margin and ends are compared as duplicates only with each other: across the linearizations
+    of a step the closest point moves along the pair, and only kind 0 follows it (an end that
+    stood in for it may no longer be the nearest point, and a new overlap elsewhere on the pair
+    would go unseen); the redundant rows this keeps cost an interior-point solver nothing.
+
     Args:
         cells: the cells.
         pairs: (P, 2) candidate pairs (e.g. :func:`candidate_pairs`).
         margin: largest separation that counts [length].
+        always_closest: keep kind 0 for every pair within the margin (above).
 
     Returns:
         ``(a, b, kind)``, int arrays, ordered by pair ``(a, b)`` and then by the axial coordinate
@@ -298,7 +306,7 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0) -> tup
     # Kind 0 is represented by the nearest kept end when that end is as close (to rounding).
     ends = np.where(keep[:, 1:], separation[:, 1:], np.inf)
     nearest_end = 1 + np.argmin(ends, axis=1)
-    represented = ends.min(axis=1) <= separation[:, 0] + rounding
+    represented = (ends.min(axis=1) <= separation[:, 0] + rounding) & (not always_closest)
     keep[:, 0] &= ~represented
     # Near duplicates, in the order: the contact of least separation (kind 0 or the end that
     # represents it) first, then the other ends by kind.
@@ -309,7 +317,7 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0) -> tup
     s_o, t_o, keep_o = s[rows, order], t[rows, order], keep[rows, order]
     near = DUPLICATE_DISTANCE * rho
     for j in range(1, PAIR_KINDS):
-        for i in range(j):
+        for i in range(1 if always_closest else 0, j):
             duplicate = keep_o[:, i] & (np.abs(s_o[:, j] - s_o[:, i]) <= near) & (np.abs(t_o[:, j] - t_o[:, i]) <= near)
             keep_o[:, j] &= ~duplicate
     keep[rows, order] = keep_o

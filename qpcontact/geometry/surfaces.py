@@ -74,22 +74,29 @@ def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -
     for plane in planes:
         if not isinstance(plane, Plane):
             raise InvalidArgumentError(f"planes: expected qpcontact.geometry.Plane objects, got {type(plane).__name__}")
-        normal = np.asarray(plane.normal)
-        for side in (-0.5, 0.5):
-            offset_axis = side * cells.lengths[:, None] * cells.axes
-            ends = cells.centers + offset_axis
-            separation = (ends - np.asarray(plane.point)) @ normal - cells.radii
+        normal, point = np.asarray(plane.normal), np.asarray(plane.point)
+        for side, kind in ((-0.5, PLANE_MINUS_END), (0.5, PLANE_PLUS_END)):
+            separation = (cells.centers + side * cells.lengths[:, None] * cells.axes - point) @ normal - cells.radii
             keep = (separation <= margin) & movable
             if side > 0:
                 keep &= cells.lengths > 0  # a sphere has one end, counted once
             cell = np.flatnonzero(keep)
-            k = cell.size
-            normals = np.broadcast_to(normal, (k, 3)).copy()
-            offset_a = offset_axis[cell] - cells.radii[cell, None] * normals
-            stretch_a = np.full(k, side)
-            static = np.full(k, -1, dtype=np.intp)
-            zeros3, zeros1 = np.zeros((k, 3)), np.zeros(k)
-            u = relative_normal_velocity(cells, cell, static, normals, offset_a, zeros3, stretch_a, zeros1)
-            kind = np.full(k, PLANE_PLUS_END if side > 0 else PLANE_MINUS_END, dtype=np.intp)
-            parts.append(Contacts(cell, static, normals, offset_a, zeros3, stretch_a, zeros1, separation[cell], u, kind))
+            parts.append(evaluate_plane_contacts(cells, plane, cell, np.full(cell.size, kind, dtype=np.intp)))
     return concatenate(parts)
+
+
+def evaluate_plane_contacts(cells: Cells, plane: Plane, cell: np.ndarray, kind: np.ndarray) -> Contacts:
+    """The contacts of the given cell ends (``kind`` 5: the −end or a sphere, 6: the +end) with
+    one plane, at the cells' present positions, in the order given (as
+    :func:`~qpcontact.geometry.contacts.evaluate_contacts` does between cells)."""
+    normal, point = np.asarray(plane.normal), np.asarray(plane.point)
+    side = np.where(kind == PLANE_PLUS_END, 0.5, -0.5)
+    offset_axis = side[:, None] * cells.lengths[cell, None] * cells.axes[cell]
+    separation = (cells.centers[cell] + offset_axis - point) @ normal - cells.radii[cell]
+    k = cell.size
+    normals = np.broadcast_to(normal, (k, 3)).copy()
+    offset_a = offset_axis - cells.radii[cell, None] * normals
+    static = np.full(k, -1, dtype=np.intp)
+    zeros3, zeros1 = np.zeros((k, 3)), np.zeros(k)
+    u = relative_normal_velocity(cells, cell, static, normals, offset_a, zeros3, side, zeros1)
+    return Contacts(cell, static, normals, offset_a, zeros3, side, zeros1, separation, u, np.asarray(kind, dtype=np.intp))

@@ -1,0 +1,210 @@
+"""The position-level step (qpcontact.colony.position): the end positions are free of overlap
+(decided by an independent brute-force capsule distance), analytic cases come out exact, overlap
+present at the start shrinks at the set speed, turning and shrinking are bounded, and a step that
+does not converge is reported and not applied."""
+
+import numpy as np
+import pytest
+
+import qpcontact as qc
+from qpcontact.colony import Colony, divide, grow_position, growth_time_step
+from qpcontact.colony.position import PositionSettings, move, position_step
+from qpcontact.errors import InvalidArgumentError, StepFailedError
+from qpcontact.geometry import substrate
+from qpcontact.studies import scenes
+
+
+def segment_distance(p0, p1, q0, q1, samples=4001):
+    """Distance between two segments by brute force: the exact distance from every sample of one
+    segment to the other (a convex function of the sample's parameter: the dense samples bracket
+    the minimum to (length/samples)² · curvature)."""
+    s = np.linspace(0.0, 1.0, samples)[:, None]
+    points = p0 + s * (p1 - p0)
+    d = q1 - q0
+    t = np.clip(((points - q0) @ d) / max(d @ d, 1e-300), 0.0, 1.0)
+    return float(np.min(np.linalg.norm(points - (q0 + t[:, None] * d), axis=1)))
+
+
+def brute_force_overlap(cells):
+    """Largest overlap (fraction of ρ_a + ρ_b) over every pair of cells, by brute force."""
+    worst = 0.0
+    half = 0.5 * cells.lengths[:, None] * cells.axes
+    ends = list(zip(cells.centers - half, cells.centers + half, strict=True))
+    for i in range(cells.n):
+        for j in range(i + 1, cells.n):
+            gap = np.linalg.norm(cells.centers[i] - cells.centers[j]) - 0.5 * (cells.lengths[i] + cells.lengths[j])
+            if gap > cells.radii[i] + cells.radii[j]:
+                continue
+            d = segment_distance(*ends[i], *ends[j])
+            worst = max(worst, (cells.radii[i] + cells.radii[j] - d) / (cells.radii[i] + cells.radii[j]))
+    return worst
+
+
+LN2 = float(np.log(2.0))
+
+
+def growing(cells, rate=LN2, dt=0.05):
+    """The drive that grows every cell by ``e^{rate·dt} − 1`` of its length over ``dt``."""
+    drive = np.zeros((cells.n, 7))
+    drive[:, 6] = cells.growth_inertia * cells.lengths * np.expm1(rate * dt) / dt
+    return drive
+
+
+def rods(centers, axes, lengths, growth_inertia=1000.0, radius=0.5):
+    centers, axes = np.asarray(centers, float), np.asarray(axes, float)
+    lengths = np.broadcast_to(np.asarray(lengths, float), (len(centers),))
+    masses = np.pi * radius**2 * (lengths + 4 / 3 * radius)
+    return qc.Cells(centers=centers, axes=axes, lengths=lengths, radii=radius, masses=masses,
+                    growth_inertia=growth_inertia * masses)
+
+
+def test_two_rods_end_to_end_are_pushed_apart_by_the_growth():
+    """Two equal collinear rods touching end to end, both growing by Δl: the only overlap-free
+    answer of least kinetic energy moves each centre by Δl/2 outwards (growth is 1000 times
+    harder to compress than translation), exactly, not only to first order."""
+    cells = rods([[-2.5, 0, 0], [2.5, 0, 0]], [[1, 0, 0], [1, 0, 0]], 4.0)
+    dt = 0.05
+    drive = growing(cells, dt=dt)
+    out = position_step(cells, dt, drive=drive)
+    assert out.converged
+    grown = 4.0 * np.expm1(np.log(2.0) * dt)
+    # Compressing growth costs G = 1000 m: the push shortens each rod by a thousandth-ish of Δl.
+    assert np.allclose(out.cells.lengths, 4.0 + grown, rtol=0, atol=2e-3 * grown)
+    separation = out.cells.centers[1, 0] - out.cells.centers[0, 0] - out.cells.lengths.mean() - 1.0
+    assert -0.01 <= separation <= 1e-6
+    assert np.allclose(out.cells.centers[:, 1:], 0.0) and np.allclose(out.cells.axes, [[1, 0, 0]] * 2)
+    assert np.isclose(out.cells.centers[0, 0], -out.cells.centers[1, 0])
+
+
+def test_a_rod_sinking_onto_a_plane_comes_to_rest_on_it():
+    cells = rods([[0, 0, 0.52]], [[1, 0, 0]], 3.0)
+    drive = np.zeros((1, 7))
+    drive[0, 2] = -2.0 * cells.masses[0]  # driven down by 2 µm per unit time
+    out = position_step(cells, 0.1, drive=drive, planes=[substrate()])
+    assert out.converged
+    assert out.cells.centers[0, 2] == pytest.approx(0.5, abs=0.01 * 1.0)
+    assert out.cells.centers[0, 2] >= 0.5 - 0.01
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_end_positions_are_free_of_overlap_by_brute_force(seed):
+    """A 2D colony snapshot (overlapping neighbours removed first), grown one large step: the
+    brute-force overlap of the end positions is within the tolerance."""
+    cells = scenes.colony_2d(150, seed)
+    settled = position_step(cells, 0.05, drive=np.zeros((cells.n, 7)), settings=PositionSettings(relaxation=1.0))
+    assert settled.converged
+    start = settled.cells.replace(momenta=0.0, angular_momenta=0.0, growth_momenta=0.0)
+    out = position_step(start, 0.05, drive=growing(start))
+    assert out.converged
+    assert out.max_overlap <= 0.01 + 1e-9
+    assert brute_force_overlap(out.cells) <= 0.01 + 1e-6
+
+
+def test_impulses_only_push_and_the_velocity_level_answer_agrees_for_a_small_step():
+    """For a small step the position-level impulses approach the velocity-level ones with a
+    speculative margin (first order in dt)."""
+    cells = rods([[0, 0, 0], [0.5, 1.0, 0], [5.0, 0.1, 0]], [[1, 0, 0], [1, 0, 0], [1, 0, 0]], 4.0)
+    dt = 1e-3
+    drive = growing(cells, dt=dt)
+    out = position_step(cells, dt, drive=drive)
+    assert out.converged
+    assert np.all(out.contact_impulses >= 0)
+    velocity = qc.step(cells, dt, drive=drive, margin=0.5, solver="clarabel", tolerance=1e-10)
+    moved_position = out.cells.centers - cells.centers
+    moved_velocity = velocity.cells.centers - cells.centers
+    assert np.allclose(moved_position, moved_velocity, atol=0.02 * np.abs(moved_velocity).max())
+
+
+def test_overlap_present_at_the_start_shrinks_at_the_relaxation_speed_and_nothing_spins():
+    """A state with overlaps up to 0.15 diameters (another simulator's): in one step no overlap
+    grows, each shrinks by up to the relaxation (0.05 diameters) and no cell turns its tips by
+    more than the turn limit."""
+    rng = np.random.default_rng(4)
+    cells = scenes.colony_2d(200, 4)
+    squeezed = cells.replace(centers=cells.centers * 0.93 + rng.normal(0, 0.02, cells.centers.shape) * [1, 1, 0])
+    before = brute_force_overlap(squeezed)
+    assert 0.1 < before < 0.6
+    settings = PositionSettings(relaxation=0.05, turn_limit=0.2)
+    out = position_step(squeezed, 0.05, drive=np.zeros((cells.n, 7)), settings=settings)
+    assert out.converged
+    assert out.max_overlap <= before
+    assert out.max_overlap <= before - 0.05 + 0.01 + 1e-9
+    turned = np.arccos(np.clip(np.einsum("ij,ij->i", squeezed.axes, out.cells.axes), -1, 1))
+    tip = turned * (squeezed.lengths / 2 + squeezed.radii)
+    assert np.all(tip <= settings.turn_limit * 2 * squeezed.radii + 1e-9)
+
+
+def test_cells_never_shrink_and_turning_is_bounded():
+    """A rod between two walls with 0.05 of room at each end, growing by 0.14: growth is stopped
+    (it may tilt a little within the turn limit), never reversed."""
+    cells = rods([[0, 0, 0]], [[1, 0, 0]], 4.0)
+    walls = [qc.Plane((-2.55, 0, 0), (1, 0, 0)), qc.Plane((2.55, 0, 0), (-1, 0, 0))]
+    settings = PositionSettings()
+    out = position_step(cells, 0.05, drive=growing(cells), planes=walls, planar=True, settings=settings)
+    assert out.converged and out.excess <= settings.overlap_tolerance
+    assert 4.0 <= out.cells.lengths[0] <= 4.0 + 0.1 + 0.02
+    turned = np.arccos(np.clip(out.cells.axes[0] @ cells.axes[0], -1, 1))
+    assert turned * (2.0 + 0.5) <= settings.turn_limit * 1.0 + 1e-9
+
+
+def test_a_step_that_does_not_converge_is_reported_and_not_applied():
+    cells = scenes.colony_2d(300, 2)
+    settings = PositionSettings(max_iterations=1, overlap_tolerance=1e-9)
+    with pytest.raises(StepFailedError) as caught:
+        position_step(cells, 0.05, drive=growing(cells), settings=settings)
+    assert caught.value.result is not None and not caught.value.result.converged
+    colony = Colony.founder(cells, np.log(2.0))
+    after, result = grow_position(colony, 0.05, settings=settings, on_failure="return")
+    assert not result.converged and after is colony
+
+
+def test_move_turns_exactly_and_ignores_spin():
+    cells = rods([[0, 0, 0]], [[1, 0, 0]], 2.0)
+    inertia = cells.masses[0] * (3 * 0.25 + 4.0) / 12
+    p = np.zeros((1, 7))
+    p[0, 5] = inertia * np.pi / 2  # a quarter turn about z in unit time
+    p[0, 3] = 1e6  # a spin about the cell's own axis (x) turns nothing
+    moved = move(cells, 1.0, p)
+    assert np.allclose(moved.axes, [[0, 1, 0]])
+
+
+def test_settings_and_arguments_are_checked():
+    with pytest.raises(InvalidArgumentError, match="overlap_tolerance"):
+        PositionSettings(overlap_tolerance=-1)
+    with pytest.raises(InvalidArgumentError, match="max_iterations"):
+        PositionSettings(max_iterations=0)
+    with pytest.raises(InvalidArgumentError, match="trust"):
+        PositionSettings(trust=2.0)
+    cells = rods([[0, 0, 0]], [[1, 0, 0]], 2.0)
+    with pytest.raises(InvalidArgumentError, match="dt"):
+        position_step(cells, -1.0)
+    with pytest.raises(InvalidArgumentError, match="drive"):
+        position_step(cells, 0.1, drive=np.zeros((2, 7)))
+    with pytest.raises(InvalidArgumentError, match="takes no bounds"):
+        position_step(cells, 0.1, settings=PositionSettings(solver="mprgp"))
+    with pytest.raises(InvalidArgumentError, match="growth_per_step"):
+        growth_time_step(Colony.founder(cells, 1.0), growth_per_step=0.0)
+
+
+def test_growth_time_step_follows_growth_not_colony_size():
+    small = Colony.founder(rods([[0, 0, 0]], [[1, 0, 0]], 2.0), np.log(2.0))
+    big_cells = scenes.colony_2d(500, 0)
+    big = Colony.founder(big_cells, np.log(2.0))
+    assert growth_time_step(small) == pytest.approx(np.log1p(0.035) / np.log(2.0))
+    assert growth_time_step(big) == growth_time_step(small)
+    assert growth_time_step(small, max_dt=0.01) == 0.01
+
+
+def test_a_grown_colony_stays_free_of_overlap_over_many_steps():
+    """Grow from one cell to about 60 cells with the position step; every step converges and the
+    brute-force overlap of the final state is within the tolerance."""
+    rng = np.random.default_rng(0)
+    colony = Colony.founder(rods([[0, 0, 0]], [[1, 0, 0]], 2.0), np.log(2.0))
+    dt = growth_time_step(colony)
+    while colony.cells.n < 60:
+        colony, out = grow_position(colony, dt, planar=True)
+        assert out.converged and out.excess <= 0.01
+        colony = divide(colony, 4.0, rng, planar=True)
+    # The end of the last step (before its divisions): overlaps within the tolerance, beyond the
+    # targets of pairs that overlapped at the start of the step (divisions' axis noise).
+    assert brute_force_overlap(out.cells) <= 0.01 + out.start_overlap
