@@ -86,7 +86,10 @@ class PositionSettings:
         allow_shrinking: False: contacts can stop a cell's growth but not shorten it.
         solver: the QP solver of each linearization (it must take bounds unless ``turn_limit`` is
             None and ``allow_shrinking`` is True).
-        tolerance: its tolerance (scaled units of :mod:`qpcontact.assembly.system`).
+        tolerance: its tolerance (scaled units of :mod:`qpcontact.assembly.system`: impulses
+            relative to the largest, velocities relative to the fastest approach). 10⁻³ moves a
+            contact by at most 10⁻³ of the step's largest approach, far below the overlap
+            tolerance, in 14 interior-point iterations instead of 22 at 10⁻⁵ (docs/performance.md).
     """
 
     overlap_tolerance: float = 0.01
@@ -97,7 +100,7 @@ class PositionSettings:
     relaxation: float = 0.05
     allow_shrinking: bool = False
     solver: str = "ipm"
-    tolerance: float = 1e-5
+    tolerance: float = 1e-3
 
     def __post_init__(self) -> None:
         checks = [("overlap_tolerance", self.overlap_tolerance, 0.0, False), ("margin", self.margin, 0.0, False),
