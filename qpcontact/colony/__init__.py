@@ -27,13 +27,13 @@ from .growth import (
     growth_time_step,
     volumes,
 )
-from .position import PositionSettings, PositionStepResult, move, position_step
+from .position import ContactImpulses, PositionSettings, PositionStepResult, move, position_step
 from .simulate import Run, Settings, run_colony
 from .snapshots import load_colony, save_colony
 from .step import StepResult, advance, largest_overlap, overlap_fractions, rotate, step
 
 __all__ = [
-    "Colony", "PositionSettings", "PositionStepResult", "Run", "Settings", "StepResult", "advance", "divide",
+    "Colony", "ContactImpulses", "PositionSettings", "PositionStepResult", "Run", "Settings", "StepResult", "advance", "divide",
     "expansion_time_step", "grow", "grow_position", "growth_drive", "growth_step", "growth_time_step",
     "largest_overlap", "load_colony", "move", "overlap_fractions", "position_step", "rotate", "run_colony",
     "save_colony", "step", "volumes",

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Plane, capsule_volume
-from .position import PositionSettings, PositionStepResult, position_step
+from .position import ContactImpulses, PositionSettings, PositionStepResult, position_step
 from .step import StepResult, rotate, step
 
 
@@ -230,13 +230,14 @@ def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.n
 
 def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None, planes: Sequence[Plane] = (),
                   planar: bool | None = None, settings: PositionSettings | None = None,
-                  on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
+                  warm: ContactImpulses | None = None, on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
     """One growth step with the position-level :func:`qpcontact.colony.position_step`
     (overdamped; no division: call :func:`divide` after it).
 
     The growth drive of :func:`growth_step` is the growth column of ``drive`` (user-given
     momenta in the other columns); after the step, masses and growth inertias grow with the
-    volume as in :func:`grow`. A step that does not converge is not applied: it raises
+    volume as in :func:`grow`. ``warm`` is the previous step's ``result.warm`` (contact impulses
+    keyed by the colony's cell ids). A step that does not converge is not applied: it raises
     :class:`~qpcontact.errors.StepFailedError` (``on_failure="raise"``) or returns the colony
     unchanged with the unconverged result (``on_failure="return"``).
     """
@@ -246,7 +247,8 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
     if full.shape != (cells.n, 7):
         raise InvalidArgumentError(f"drive: expected shape ({cells.n}, 7) (p, L, g per cell), got {full.shape}")
     full[:, 6] = growth_drive(cells, increase, dt)
-    out = position_step(cells, dt, drive=full, planes=planes, planar=planar, settings=settings, on_failure=on_failure)
+    out = position_step(cells, dt, drive=full, planes=planes, planar=planar, settings=settings, ids=colony.ids,
+                        warm=warm, on_failure=on_failure)
     if not out.converged:
         return colony, out
     grown = _grown(colony, cells, out.cells, paid, dt)

@@ -128,6 +128,49 @@ class PositionSettings:
         return self.turn_limit is not None or not self.allow_shrinking
 
 
+@dataclass(frozen=True)
+class ContactImpulses:
+    """Contact impulses of a step keyed by cell ids and contact kind: the warm start of the next
+    step (:func:`position_step`'s ``warm``), matched contact by contact whatever the cells'
+    order.
+
+    Attributes:
+        a: (K,) id of cell a.
+        b: (K,) id of cell b, or ``-1 - j`` for plane ``j``.
+        kind: (K,) contact kind (:class:`qpcontact.geometry.Contacts`).
+        impulse: (K,) normal impulse [momentum].
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    kind: np.ndarray
+    impulse: np.ndarray
+
+    @classmethod
+    def empty(cls) -> ContactImpulses:
+        none = np.zeros(0, dtype=np.int64)
+        return cls(none, none.copy(), none.copy(), np.zeros(0))
+
+    def lookup(self, a: np.ndarray, b: np.ndarray, kind: np.ndarray) -> np.ndarray:
+        """The impulse of each contact ``(a[i], b[i], kind[i])``; 0 where there is none."""
+        if self.impulse.size == 0 or a.size == 0:
+            return np.zeros(a.size)
+        low = min(int(self.b.min()), int(b.min()), 0)
+        base = max(int(self.a.max()), int(a.max()), int(self.b.max()), int(b.max())) - low + 1
+        if base >= 2**28:
+            raise InvalidArgumentError(f"ids: contact keys need ids below 2**28, got {base}")
+
+        def key(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
+            return (x.astype(np.int64) * base + (y.astype(np.int64) - low)) * 8 + z
+
+        reference = key(self.a, self.b, self.kind)
+        order = np.argsort(reference)
+        reference, values = reference[order], self.impulse[order]
+        query = key(a, b, kind)
+        where = np.minimum(np.searchsorted(reference, query), reference.size - 1)
+        return np.where(reference[where] == query, values[where], 0.0)
+
+
 @dataclass
 class PositionStepResult:
     """The outcome of one :func:`position_step`.
@@ -150,6 +193,8 @@ class PositionStepResult:
         times: seconds spent in ``detect``, ``assemble``, ``solve`` and in ``total``.
         solver_iterations: the solver's iterations, summed over the step.
         message: why the step did not converge, if it did not.
+        warm: the contact impulses keyed by cell ids (``ids`` of :func:`position_step`), the warm
+            start of the next step.
     """
 
     cells: Cells
@@ -165,6 +210,7 @@ class PositionStepResult:
     times: dict[str, float] = field(default_factory=dict)
     solver_iterations: int = 0
     message: str = ""
+    warm: ContactImpulses = field(default_factory=ContactImpulses.empty)
 
 
 def move(cells: Cells, dt: float, momenta: np.ndarray) -> Cells:
@@ -269,6 +315,8 @@ def position_step(
     planes: Sequence[Plane] = (),
     planar: bool | None = None,
     settings: PositionSettings | None = None,
+    ids: np.ndarray | None = None,
+    warm: ContactImpulses | None = None,
     on_failure: str = "raise",
 ) -> PositionStepResult:
     """Advance overdamped cells by ``dt`` with non-penetration at the end of the step (module
@@ -284,6 +332,11 @@ def position_step(
             (:meth:`~qpcontact.geometry.Cells.is_monolayer` of the cells with the driving momenta,
             and every plane's normal in the xy-plane).
         settings: :class:`PositionSettings` (defaults if None).
+        ids: (N,) cell ids that stay with the cells from step to step (default: their indices),
+            the keys of the warm start.
+        warm: contact impulses of the previous step (its result's ``warm``): the first solve of
+            a solver that takes a warm start starts from them, contact by contact; later solves
+            of the step start from the previous solve's.
         on_failure: ``"raise"`` a :class:`~qpcontact.errors.StepFailedError` when the step does
             not converge (default), or ``"return"`` the unconverged result.
 
@@ -312,6 +365,11 @@ def position_step(
         if not isinstance(plane, Plane):
             raise InvalidArgumentError(f"planes: expected Plane objects, got {type(plane).__name__}")
     n = cells.n
+    ids = np.arange(n) if ids is None else np.asarray(ids)
+    if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
+        raise InvalidArgumentError(f"ids: expected {n} integers, got {ids.dtype} of shape {ids.shape}")
+    if warm is not None and not isinstance(warm, ContactImpulses):
+        raise InvalidArgumentError(f"warm: expected ContactImpulses, got {type(warm).__name__}")
     drive = np.zeros((n, 7)) if drive is None else np.asarray(drive, dtype=float)
     if drive.shape != (n, 7) or not np.all(np.isfinite(drive)):
         raise InvalidArgumentError(f"drive: expected finite values of shape ({n}, 7), got shape {drive.shape}")
@@ -341,12 +399,14 @@ def position_step(
     overlaps: list[float] = []
     relaxation = 1.0
     solver_iterations = 0
-    lam, lam_keys = np.zeros(0), np.zeros(0, dtype=np.int64)
+    last = ContactImpulses.empty() if warm is None else warm  # keyed by ids
     converged, message, iteration = False, "", 0
     for iteration in range(settings.max_iterations + 1):
         now = move(cells, dt, drive + impulses)
         t0 = time.perf_counter()
-        found = found.union(_detect(now, planes, reach, planar), n_planes, n)
+        # The first search reaches the whole margin; later ones half of it, so that the contact
+        # set (and the solver's factorization pattern) usually stays the same within a step.
+        found = found.union(_detect(now, planes, reach if iteration == 0 else 0.5 * reach, planar), n_planes, n)
         contacts = _evaluate(now, found, planes, planar)
         times["detect"] += time.perf_counter() - t0
         diameter = _diameters(now, contacts)
@@ -378,39 +438,41 @@ def position_step(
         b = (target - contacts.separation) / dt + u
         if not np.any(b > 0):  # nothing asks for a push: the free motion is the answer
             impulses = np.zeros((n, 7))
-            lam, lam_keys = np.zeros(0), np.zeros(0, dtype=np.int64)
+            last = ContactImpulses.empty()
             times["assemble"] += time.perf_counter() - t0
             continue
         system = build_system(frame, contacts, b, planar=bool(planar))
         lower, upper = _bounds(system, cells, drive, impulses, dt, settings) if settings.bounded else (None, None)
         problem = Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper)
         times["assemble"] += time.perf_counter() - t0
+        key_a, key_b = ids[found.a], np.where(found.b >= 0, ids[np.maximum(found.b, 0)], found.b)
+        initial = None
+        if spec.warm_start:
+            initial = system.from_contact_impulses(last.lookup(key_a, key_b, found.kind))
         t0 = time.perf_counter()
-        out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance)
+        out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial)
         times["solve"] += time.perf_counter() - t0
         solver_iterations += out.iterations or 0
         if out.y is None or not np.all(np.isfinite(out.y)):
             message = f"{settings.solver} failed at linearization {iteration}: {out.status} {out.error or ''}".strip()
             break
         lam = system.to_contact_impulses(out.lam) if out.lam is not None else np.zeros(len(contacts))
-        lam_keys = found.key(n_planes, n)  # sorted (found is kept sorted by key)
+        last = ContactImpulses(key_a, key_b, found.kind.copy(), lam)
         if len(overlaps) >= 2 and overlaps[-1] > overlaps[-2]:
             relaxation = 0.5
         impulses = impulses + relaxation * (system.to_impulses(out.y) - impulses)
     end = move(cells, dt, drive + impulses)
     contacts = _evaluate(end, found, planes, planar)
     diameter = _diameters(end, contacts)
-    impulse_of_contact = np.zeros(len(contacts))
-    if lam_keys.size:
-        keys = found.key(n_planes, n)
-        where = np.minimum(np.searchsorted(lam_keys, keys), lam_keys.size - 1)
-        impulse_of_contact = np.where(lam_keys[where] == keys, lam[where], 0.0)
+    key_a, key_b = ids[found.a], np.where(found.b >= 0, ids[np.maximum(found.b, 0)], found.b)
+    impulse_of_contact = last.lookup(key_a, key_b, found.kind)
     times["total"] = time.perf_counter() - t_start
     result = PositionStepResult(
         cells=end, impulses=impulses, converged=converged, iterations=iteration, contacts=contacts,
         contact_impulses=impulse_of_contact, overlaps=overlaps, start_overlap=start_overlap,
         max_overlap=float(np.max(-contacts.separation / diameter, initial=0.0)), excess=excess, times=times,
-        solver_iterations=solver_iterations, message=message)
+        solver_iterations=solver_iterations, message=message,
+        warm=ContactImpulses(key_a, key_b, found.kind.copy(), impulse_of_contact))
     if not converged and on_failure == "raise":
         raise StepFailedError(f"position step did not converge: {message}", result)
     return result

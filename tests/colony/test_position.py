@@ -208,3 +208,35 @@ def test_a_grown_colony_stays_free_of_overlap_over_many_steps():
     # The end of the last step (before its divisions): overlaps within the tolerance, beyond the
     # targets of pairs that overlapped at the start of the step (divisions' axis noise).
     assert brute_force_overlap(out.cells) <= 0.01 + out.start_overlap
+
+
+def test_warm_start_carries_contact_impulses_by_cell_id():
+    """The contact impulses of a step are keyed by cell ids and kind: looked up after the cells
+    are reordered they are the same; a solver that takes a warm start (MPRGP, so no bounds) starts
+    from them and reaches the same answer as from zero. (It is not faster: docs/performance.md.)"""
+    cells = scenes.colony_2d(200, 5)
+    settings = PositionSettings(solver="mprgp", turn_limit=None, allow_shrinking=True, tolerance=1e-8)
+    drive = growing(cells)
+    ids = np.arange(cells.n) * 3 + 7
+    first = position_step(cells, 0.05, drive=drive, settings=settings, ids=ids)
+    warm = first.warm
+    assert np.all(warm.impulse >= 0) and warm.impulse.max() > 0
+    assert np.array_equal(warm.lookup(warm.a, warm.b, warm.kind), warm.impulse)
+    reverse = np.arange(cells.n)[::-1]
+    index_of = {int(i): k for k, i in enumerate(ids[reverse])}
+    # the same contacts, named through the reversed order's indices, give the same impulses
+    a_rev = np.array([index_of[int(i)] for i in warm.a])
+    b_rev = np.array([index_of[int(i)] if i >= 0 else int(i) for i in warm.b])
+    assert np.array_equal(warm.lookup(ids[reverse][a_rev], np.where(b_rev >= 0, ids[reverse][np.maximum(b_rev, 0)], b_rev),
+                                      warm.kind), warm.impulse)
+    assert np.all(warm.lookup(warm.a + 1, warm.b, warm.kind)[np.isin(warm.a + 1, warm.a, invert=True)] == 0)
+    cold = position_step(first.cells, 0.05, drive=drive, settings=settings, ids=ids)
+    flipped = position_step(first.cells.subset(reverse), 0.05, drive=drive[reverse], settings=settings,
+                            ids=ids[reverse], warm=warm)
+    assert cold.converged and flipped.converged
+    # both stop within the overlap tolerance of the same fixed point, not necessarily at the same iterate
+    assert np.allclose(flipped.cells.centers[::-1], cold.cells.centers, atol=0.01)
+    with pytest.raises(InvalidArgumentError, match="ids"):
+        position_step(cells, 0.05, ids=np.zeros(3, dtype=int))
+    with pytest.raises(InvalidArgumentError, match="warm"):
+        position_step(cells, 0.05, warm=[1, 2])
