@@ -52,6 +52,8 @@ from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, chec
 MAX_ITERATIONS = 100
 #: Iterations without a new best error after which the method stops (rounding has won).
 STALL_ITERATIONS = 5
+#: Centrality correctors per iteration (Gondzio): each is one more solve with the same factorization.
+CORRECTORS = 1
 #: Fraction of the way to the boundary an iterate may go (keeps it interior).
 STEP_FRACTION = 0.995
 
@@ -315,10 +317,26 @@ def interior_point(
         mu = newton.complementarity()
         affine = newton.direction(-x.lam * x.s, -x.alpha * x.p, -x.beta * x.q)
         sigma = min(1.0, (newton.complementarity(affine, *newton.lengths(affine)) / mu) ** 3) if mu > 0 else 0.0
-        step = newton.direction(sigma * mu - x.lam * x.s - affine.lam * affine.s,
-                                sigma * mu - x.alpha * x.p - affine.alpha * affine.p,
-                                sigma * mu - x.beta * x.q - affine.beta * affine.q)
+        targets = (sigma * mu - x.lam * x.s - affine.lam * affine.s,
+                   sigma * mu - x.alpha * x.p - affine.alpha * affine.p,
+                   sigma * mu - x.beta * x.q - affine.beta * affine.q)
+        step = newton.direction(*targets)
         primal, dual = newton.lengths(step)
+        for _ in range(CORRECTORS):
+            # Gondzio's centrality corrector: aim at a longer step, pull the complementarity
+            # products of that trial point back into [0.1, 10]·σμ, and keep the correction when
+            # the step gets longer (one more solve with the same factorization).
+            trial = x.moved(step, min(1.0, 1.5 * primal + 0.1), min(1.0, 1.5 * dual + 0.1))
+            box = (0.1 * sigma * mu, 10.0 * sigma * mu)
+            products = (trial.lam * trial.s, trial.alpha * trial.p, trial.beta * trial.q)
+            shifts = [np.clip(v, *box) - v for v in products]
+            shifts = [np.maximum(v, -box[1]) for v in shifts]
+            better = newton.direction(*(t + d for t, d in zip(targets, shifts, strict=True)))
+            p2, d2 = newton.lengths(better)
+            if min(p2, d2) < 1.01 * min(primal, dual):
+                break
+            step, primal, dual = better, p2, d2
+            targets = tuple(t + d for t, d in zip(targets, shifts, strict=True))
         x = x.moved(step, STEP_FRACTION * primal, STEP_FRACTION * dual)
     return _result(best, best_error, iteration, status, start)
 
