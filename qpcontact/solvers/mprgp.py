@@ -204,12 +204,22 @@ def mprgp(
 
 def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
            settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
-    return mprgp(problem.matrix, problem.rhs, tolerance=tolerance, time_limit=time_limit, initial=initial,
-                 **settings).output()
+    if not problem.bounded:
+        return mprgp(problem.matrix, problem.rhs, tolerance=tolerance, time_limit=time_limit, initial=initial,
+                     **settings).output()
+    # Bounds on ỹ as more rows (Problem.bounds_as_rows); their impulses start at 0.
+    matrix, rhs = problem.bounds_as_rows()
+    k = problem.shape[0]
+    start = None if initial is None else np.concatenate([initial, np.zeros(matrix.shape[0] - k)])
+    out = mprgp(matrix, rhs, tolerance=tolerance, time_limit=time_limit, initial=start, **settings).output()
+    if out.lam is not None:
+        out.lam = out.lam[:k]
+    return out
 
 
 register(SolverSpec(
     "mprgp", formulations=("complementarity",), forms=("contact",), warm_start=True, time_limit=True, solve=_solve,
     description="built-in matrix-free MPRGP on the contact-space complementarity QP (no factorization)",
     settings=("max_iterations", "proportioning"), blockwise=True, matrix_free=("contact",), bundled=True,
+    bounds=("contact",),
 ))

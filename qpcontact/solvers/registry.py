@@ -91,6 +91,22 @@ class Problem:
         k, n = self.matrix.shape
         return int(k), int(n)
 
+    def bounds_as_rows(self) -> tuple[sp.csr_matrix, np.ndarray]:
+        """``(B̃', b̃')``: the bounds written as more rows of the contact problem, ``ỹ_j ≥ l_j``
+        as the row ``e_jᵀ`` with right-hand side ``l_j`` and ``ỹ_j ≤ u_j`` as ``−e_jᵀ`` with
+        ``−u_j``, after the contact rows. ``min ½‖ỹ‖² s.t. B̃'ỹ ≥ b̃'`` is this problem, so any
+        contact-form solver takes bounds this way (its ``λ̃'`` for the first K rows are the
+        contact impulses, ``ỹ = B̃'ᵀλ̃'``)."""
+        k, n = self.shape
+        lower = np.full(n, -np.inf) if self.lower is None else self.lower
+        upper = np.full(n, np.inf) if self.upper is None else self.upper
+        low, high = np.flatnonzero(np.isfinite(lower)), np.flatnonzero(np.isfinite(upper))
+        rows = sp.csr_matrix((np.concatenate([np.ones(low.size), -np.ones(high.size)]),
+                              (np.arange(low.size + high.size), np.concatenate([low, high]))),
+                             shape=(low.size + high.size, n))
+        return (sp.vstack([sp.csr_matrix(self.matrix), rows], format="csr"),
+                np.concatenate([self.rhs, lower[low], -upper[high]]))
+
     def block(self, rows: np.ndarray, columns: np.ndarray) -> Problem:
         """The sub-problem on these rows and columns (an independent block)."""
         def part(values: np.ndarray | None) -> np.ndarray | None:
