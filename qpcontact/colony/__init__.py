@@ -4,9 +4,14 @@
   move) and its helpers;
 - :mod:`.growth`: :class:`Colony` (cells with lineage), :func:`grow`, :func:`divide`,
   :func:`expansion_time_step`;
-- :mod:`.snapshots`: colony snapshots as NPZ (:func:`save_colony`, :func:`load_colony`), the one
-  reader and writer of cells in NPZ files;
+- :mod:`.snapshots`: colony snapshots as NPZ (:func:`save_colony`, :func:`load_colony`,
+  :func:`load_snapshot`; format version 2 with the run's settings, step and random state), the
+  one reader and writer of cells in NPZ files;
 - :mod:`.simulate`: ``qpcontact simulate`` (:func:`run_colony` with :class:`Settings`);
+- :mod:`.runs`: what keeps a run from losing anything: the output folder
+  (:class:`RunFolder`), history appends, atomic snapshots, Ctrl-C, resuming, ``config.toml``;
+- :mod:`.hooks`: model hooks, the user's per-step function (:class:`StepControl`);
+- :mod:`.paraview`: ParaView files (``.vtu`` per snapshot, ``.pvd`` series; needs meshio);
 - :mod:`.plots`: pictures of a run (matplotlib; imported only when drawing:
   ``from qpcontact.colony import plots``).
 
@@ -14,12 +19,14 @@ Imports the geometry, assembly, solvers and resolve wings only.
 """
 
 from .growth import Colony, divide, expansion_time_step, grow, growth_drive, growth_step, volumes
-from .simulate import Run, Settings, run_colony
-from .snapshots import load_colony, save_colony
+from .hooks import StepControl, push
+from .runs import RunFolder
+from .simulate import Run, Settings, StepOutcome, run_colony
+from .snapshots import Snapshot, load_colony, load_snapshot, save_colony
 from .step import StepResult, advance, largest_overlap, overlap_fractions, rotate, step
 
 __all__ = [
-    "Colony", "Run", "Settings", "StepResult", "advance", "divide", "expansion_time_step", "grow", "growth_drive",
-    "growth_step", "largest_overlap", "load_colony", "overlap_fractions", "rotate", "run_colony", "save_colony",
-    "step", "volumes",
+    "Colony", "Run", "RunFolder", "Settings", "Snapshot", "StepControl", "StepOutcome", "StepResult", "advance",
+    "divide", "expansion_time_step", "grow", "growth_drive", "growth_step", "largest_overlap", "load_colony",
+    "load_snapshot", "overlap_fractions", "push", "rotate", "run_colony", "save_colony", "step", "volumes",
 ]
