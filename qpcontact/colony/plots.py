@@ -99,12 +99,15 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
 def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None, *, side_view: bool = False,
                         planes: Sequence[Any] = ()) -> Path:
     """Draw the colony from above (and, with ``side_view``, from the side under it) and save it
-    as an image (PNG, SVG, ... by the file suffix)."""
-    fig = Figure(figsize=(7, 8.5 if side_view else 6), dpi=120, layout="constrained")
+    as an image (PNG, SVG, ... by the file suffix). The figure's height follows the colony's
+    shape (a colony in a channel is a strip)."""
+    fig = Figure(figsize=(7, 6), dpi=120, layout="constrained")
     if not side_view:
-        draw_colony(fig.subplots(), cells, planes=planes)
+        top = fig.subplots()
+        draw_colony(top, cells, planes=planes)
+        height = 0.0
     else:
-        top, side = fig.subplots(2, 1, height_ratios=(3, 1.2))
+        top, side = fig.subplots(2, 1)
         polys = draw_colony(top, cells, planes=planes, colorbar=False)
         draw_colony(side, cells, title="side view (from −y)", planes=planes, view="side", colorbar=False)
         # The same x range as the top view, and at least a quarter of it in height (a flat
@@ -115,11 +118,11 @@ def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None
         height = max(float(z.max()) + 0.3 - bottom, 0.25 * (x_range[1] - x_range[0]))
         side.set_xlim(*x_range)
         side.set_ylim(bottom, bottom + height)
-        y_range = top.get_ylim()
-        ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the two panels together
-        top.get_gridspec().set_height_ratios([y_range[1] - y_range[0], height])
-        fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 4, 12)))
+        top.get_gridspec().set_height_ratios([top.get_ylim()[1] - top.get_ylim()[0], height])
         fig.colorbar(polys, ax=[top, side], label="axis orientation in the xy-plane [deg]", shrink=0.8)
+    x_range, y_range = top.get_xlim(), top.get_ylim()
+    ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
+    fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))
     if title:
         fig.suptitle(title, fontsize=10)
     fig.savefig(path)
