@@ -56,7 +56,7 @@ class StepControl:
 
 
 #: A model hook: ``hook(colony, step) -> None | Colony | StepControl``.
-Hook = Callable[[Colony, int], "Colony | StepControl | None"]
+Hook = Callable[[Colony, int], Colony | StepControl | None]
 
 
 def push(colony: Colony, velocities: Any) -> np.ndarray:

@@ -192,22 +192,18 @@ class RunOptions:
             raise InvalidArgumentError(f"snapshot_every: must be an integer >= 0, got {self.snapshot_every!r}")
 
 
-class StepOutcome(NamedTuple):
-    """What a run's step function returns (:func:`step_function`).
+# (The functional form keeps the field types real types, not strings, for the API reference.)
+StepOutcome = NamedTuple("StepOutcome", [("colony", Colony), ("result", StepResult), ("dt", float), ("rejected", int)])  # noqa: UP014
+StepOutcome.__doc__ = """What a run's step function returns (:func:`step_function`).
 
-    Attributes:
-        colony: the colony after the step, before division.
-        result: the step's :class:`~qpcontact.colony.StepResult` (its ``result`` — the
-            :class:`qpcontact.Result` of the contact solve, with ``contacts``, ``times`` and
-            ``errors`` — and ``max_overlap``, ``mean_overlap`` fill the history).
-        dt: the time step taken [doubling times].
-        rejected: attempts rejected and retried with half the step.
-    """
-
-    colony: Colony
-    result: StepResult
-    dt: float
-    rejected: int
+Attributes:
+    colony: the colony after the step, before division.
+    result: the step's :class:`~qpcontact.colony.StepResult` (its ``result`` — the
+        :class:`qpcontact.Result` of the contact solve, with ``contacts``, ``times`` and
+        ``errors`` — and ``max_overlap``, ``mean_overlap`` fill the history).
+    dt: the time step taken [doubling times].
+    rejected: attempts rejected and retried with half the step.
+"""
 
 
 #: A run's step function: ``take_step(colony, dt, *, drive) -> StepOutcome``.
