@@ -10,11 +10,12 @@ the common flags.
 - :func:`add_output_arguments`: ``--out`` (a folder, by default ``./<command>-out/``) and
   ``--overwrite``;
 - :func:`run_standalone`: a command's ``main(argv)`` (``python -m`` and the tests) with the same
-  parser as ``qpcontact COMMAND``.
+  parser as ``qpcontact COMMAND``; :func:`run_checked`: a qpcontact error a command raises before
+  its work is one line and exit status 2.
 
 A command module provides ``add_arguments(parser)`` and ``run_command(args) -> int``;
 :mod:`qpcontact.cli` collects them into one parser with sub-commands. Standard library only;
-importable from every wing.
+importable from every wing (it imports only :mod:`qpcontact.errors`).
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
+
+from .errors import QPContactError
 
 
 class Parser(argparse.ArgumentParser):
@@ -128,7 +131,18 @@ def run_standalone(prog: str, add_arguments: Callable[[argparse.ArgumentParser],
         args = parser.parse_args(sys.argv[1:] if argv is None else list(argv))
     except SystemExit as exc:
         return exit_status(exc)
-    return int(run(args) or 0)
+    return run_checked(prog, run, args)
+
+
+def run_checked(prog: str, run: Callable[[argparse.Namespace], int], args: argparse.Namespace) -> int:
+    """``run(args)``; a :class:`~qpcontact.errors.QPContactError` it raises (what a command finds
+    wrong before it starts its work: an unknown name, a file it cannot read, an output folder it
+    cannot use) is said in one line on stderr, exit status 2."""
+    try:
+        return int(run(args) or 0)
+    except QPContactError as exc:
+        print(f"{prog}: {exc}", file=sys.stderr)
+        return 2
 
 
 def exit_status(exc: SystemExit) -> int:

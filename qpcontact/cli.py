@@ -15,7 +15,7 @@ import importlib
 import sys
 
 from . import __version__
-from .arguments import Parser, exit_status
+from .arguments import Parser, exit_status, run_checked
 
 #: sub-command -> (module, one-line help). Each module has ``add_arguments(parser)`` and ``run_command(args)``.
 COMMANDS = {
@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
             command_parser(parser, args.command).error(f"unrecognized arguments: {' '.join(unknown)}")
     except SystemExit as exc:
         return exit_status(exc)
-    return int(importlib.import_module(COMMANDS[args.command][0]).run_command(args) or 0)
+    return run_checked(f"qpcontact {args.command}", importlib.import_module(COMMANDS[args.command][0]).run_command, args)
 
 
 if __name__ == "__main__":

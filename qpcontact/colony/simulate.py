@@ -551,10 +551,7 @@ def run_command(args: argparse.Namespace) -> int:
     from ..outputs import describe_written
 
     try:
-        settings, options, snapshot, folder = open_run(args)
-    except QPContactError as exc:
-        print(f"qpcontact simulate: {exc}", file=sys.stderr)
-        return 2
+        settings, options, snapshot, folder = open_run(args)  # a QPContactError here: exit 2 (run_checked)
     except KeyboardInterrupt:
         print("qpcontact simulate: interrupted before the run started", file=sys.stderr)
         return 130

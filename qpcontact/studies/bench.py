@@ -56,7 +56,7 @@ import numpy as np
 from ..arguments import add_output_arguments, comma_list, non_negative_int, positive_float, positive_int, run_standalone
 from ..assembly import ContactSystem, build_system
 from ..colony.snapshots import load_cells, save_cells
-from ..errors import OutputFolderError, QPContactError
+from ..errors import OutputFolderError
 from ..geometry import Cells, colliding, find_contacts
 from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import active_set_polish, metrics, reference_solution, solve_system
@@ -505,15 +505,11 @@ def run_command(args: argparse.Namespace) -> int:
         return 0
     out = args.out
     outputs = OUTPUTS + (PROFILE_OUTPUTS if args.profile else ())
-    try:
-        # performance.md keeps everything but its table: an existing one is updated, not replaced.
-        prepare_folder(out, [name for name in outputs if name != "performance.md"], overwrite=args.overwrite)
-        if (out / "performance.md").exists() and not args.overwrite:
-            raise OutputFolderError(f"{out} holds performance.md of an earlier run; pass --overwrite to update its "
-                                    "table, or choose another output folder")
-    except QPContactError as exc:
-        print(f"qpcontact bench: {exc}", file=sys.stderr)
-        return 2
+    # performance.md keeps everything but its table: an existing one is updated, not replaced.
+    prepare_folder(out, [name for name in outputs if name != "performance.md"], overwrite=args.overwrite)
+    if (out / "performance.md").exists() and not args.overwrite:
+        raise OutputFolderError(f"{out} holds performance.md of an earlier run; pass --overwrite to update its "
+                                "table, or choose another output folder")
     records = []
     common = ["--repeats", str(args.repeats), "--seed", str(args.seed), "--tolerance", repr(args.tolerance),
               "--time-limit", repr(args.time_limit), "--cache-dir", str(args.cache_dir)]

@@ -29,7 +29,6 @@ import numpy as np
 
 from ..arguments import add_output_arguments, comma_list, positive_int, run_standalone
 from ..colony import Settings, run_colony
-from ..errors import QPContactError
 from ..outputs import atomic_write, describe_written, prepare_folder, write_text
 from ..solvers import available_solvers
 
@@ -103,11 +102,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    try:
-        prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
-    except QPContactError as exc:
-        print(f"colony_benchmark: {exc}", file=sys.stderr)
-        return 2
+    prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
     installed = available_solvers()
     rows = []
     for label, changes in CONFIGS:

@@ -50,7 +50,7 @@ import qpsolvers
 
 from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
 from ..assembly import ContactSystem, build_system
-from ..errors import InvalidArgumentError, QPContactError, UnknownSolverError
+from ..errors import InvalidArgumentError, UnknownSolverError
 from ..geometry import colliding, find_contacts
 from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import metrics, solve_system
@@ -554,18 +554,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run_command(args: argparse.Namespace) -> int:
     """``qpcontact compare``."""
-    try:
-        if args.replot:
-            prepare_folder(args.out, ("solvers.png",), overwrite=args.overwrite)
-            plot(read_csv(args.replot), args.out / "solvers.png")
-            print(describe_written([args.out / "solvers.png"]))
-            return 0
-        cases = _select_scenes(args.scenes, args.quick)
-        methods = all_methods(args.solvers)
-        prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
-    except (QPContactError, OSError) as exc:
-        print(f"qpcontact compare: {exc}", file=sys.stderr)
-        return 2
+    if args.replot:
+        if not args.replot.is_file():
+            raise InvalidArgumentError(f"{args.replot}: no such file")
+        prepare_folder(args.out, ("solvers.png",), overwrite=args.overwrite)
+        plot(read_csv(args.replot), args.out / "solvers.png")
+        print(describe_written([args.out / "solvers.png"]))
+        return 0
+    cases = _select_scenes(args.scenes, args.quick)
+    methods = all_methods(args.solvers)
+    prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
     from tqdm import tqdm
 
     tolerances = args.tolerances or ([1e-3, 1e-6] if args.quick else list(DEFAULT_TOLERANCES))

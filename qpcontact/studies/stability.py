@@ -383,17 +383,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run_command(args: argparse.Namespace) -> int:
     """``qpcontact stability``: exit status 1 if any run was wrong, crashed or timed out."""
     outputs = ("stability_regularization.md",) if args.regularization else ("stability.csv", "stability.md")
-    try:
-        names = [name for name in CATALOGUE if any(fnmatch.fnmatch(name, p) for p in args.cases)
-                 and (not args.quick or args.cases != ["*"] or name in QUICK_CASES)]
-        if not names:
-            raise InvalidArgumentError(f"no case matches {','.join(args.cases)!r}; known: {', '.join(CATALOGUE)}")
-        forms = args.forms or (["auto"] if args.quick else ["primal", "contact"])
-        triples = runs(args.solvers, args.formulations, forms)  # an unknown or uninstalled solver: a named error
-        prepare_folder(args.out, outputs, overwrite=args.overwrite)
-    except QPContactError as exc:
-        print(f"qpcontact stability: {exc}", file=sys.stderr)
-        return 2
+    names = [name for name in CATALOGUE if any(fnmatch.fnmatch(name, p) for p in args.cases)
+             and (not args.quick or args.cases != ["*"] or name in QUICK_CASES)]
+    if not names:
+        raise InvalidArgumentError(f"no case matches {','.join(args.cases)!r}; known: {', '.join(CATALOGUE)}")
+    forms = args.forms or (["auto"] if args.quick else ["primal", "contact"])
+    triples = runs(args.solvers, args.formulations, forms)  # an unknown or uninstalled solver: a named error
+    prepare_folder(args.out, outputs, overwrite=args.overwrite)
     if args.regularization:
         out = write_text(args.out / outputs[0], f"# least_squares: distance to the reference against ε (seed {args.seed}, "
                          f"tolerance {TOLERANCE:g})\n\n" + regularization_markdown(seed=args.seed) + "\n")

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from qpcontact.studies import compare
+from tests.helpers import interrupt_on_call
 
 
 def read(path):
@@ -62,15 +63,7 @@ def test_shifted_geometric_mean():
 def test_ctrl_c_writes_the_runs_that_were_done_and_earlier_results_are_kept(tmp_path, monkeypatch, capsys):
     out = tmp_path / "cmp"
     args = ["--scenes", "two_rods", "--solvers", "linear,osqp", "--tolerances", "1e-3", "--repeats", "1", "--out", str(out)]
-    real, calls = compare.run_one, []
-
-    def interrupted_on_the_third(*a, **k):
-        calls.append(a)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return real(*a, **k)
-
-    monkeypatch.setattr(compare, "run_one", interrupted_on_the_third)
+    interrupt_on_call(monkeypatch, compare, "run_one", 3)
     assert compare.main(args) == 130
     assert len(read(out / "solvers.csv")) == 2
     assert "Interrupted (Ctrl-C) after 2 runs" in (out / "solvers.md").read_text()

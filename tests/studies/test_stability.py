@@ -13,6 +13,7 @@ import qpcontact as q
 from qpcontact.resolve import metrics
 from qpcontact.studies.catalogue import CATALOGUE, hub, long_chain
 from qpcontact.studies.stability import KKT_LIMIT, check, main, prepare
+from tests.helpers import interrupt_on_call
 
 #: Reduced sizes of the large cases.
 SMALL = {"hub_1000": {"n_neighbours": 60}, "chain_10000": {"n_cells": 200}}
@@ -213,15 +214,7 @@ def test_ctrl_c_writes_the_runs_that_were_done(tmp_path, monkeypatch):
     """A Ctrl-C lost the whole report."""
     from qpcontact.studies import stability
 
-    real, calls = stability.guarded, []
-
-    def interrupted_on_the_third(*args, **kwargs):
-        calls.append(args)
-        if len(calls) == 3:
-            raise KeyboardInterrupt
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(stability, "guarded", interrupted_on_the_third)
+    interrupt_on_call(monkeypatch, stability, "guarded", 3)
     out = tmp_path / "stab"
     assert main(["--cases", "crossing,parallel_0", "--solvers", "linear,osqp", "--formulations", "complementarity",
                  "--forms", "contact", "--scaling", "on", "--out", str(out)]) == 130
