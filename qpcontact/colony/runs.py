@@ -43,7 +43,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidArgumentError, OutputFolderError
-from ..outputs import atomic_write, prepare_folder, write_text
+from ..outputs import atomic_write, earlier_outputs, prepare_folder, write_text
 from .growth import Colony
 from .snapshots import Snapshot, save_colony
 
@@ -56,6 +56,8 @@ TIMING_FIELDS = ("solve_seconds", "step_seconds")
 #: Every file a run writes in its folder (glob patterns, relative to it).
 RUN_OUTPUTS = ("config.toml", "history.csv", "snapshots/step_*.npz", "colony.png", "history.png", "colony.gif",
                "colony.pvd", "vtk/step_*.vtu")
+#: Temporary files of writes that a killed process left (``qpcontact.outputs.replacing``).
+LEFTOVERS = (".*.tmp", "snapshots/.*.tmp", "vtk/.*.tmp")
 _STEP_FILE = re.compile(r"step_(\d+)\.(npz|vtu)")
 
 
@@ -91,7 +93,7 @@ class RunFolder:
             OutputFolderError: it cannot be written, or holds another run and ``overwrite`` is
                 False (with ``overwrite`` that run's files are removed now).
         """
-        folder = cls(prepare_folder(path, RUN_OUTPUTS, overwrite=overwrite), vtk=vtk, first_step=first_step)
+        folder = cls(prepare_folder(path, RUN_OUTPUTS + LEFTOVERS, overwrite=overwrite), vtk=vtk, first_step=first_step)
         folder._start_history([])
         return folder
 
@@ -100,7 +102,8 @@ class RunFolder:
         """The folder of an interrupted run, continued from one of its snapshots.
 
         The history keeps the rows before the snapshot's step (they must end at the step
-        before it); ParaView files after it are removed.
+        before it); ParaView files after it, and temporary files a killed process left, are
+        removed.
 
         Raises:
             OutputFolderError: the folder cannot be written; it has snapshots after this one
@@ -114,7 +117,8 @@ class RunFolder:
             raise OutputFolderError(
                 f"{folder.path}: the run has snapshots after step {start} (the latest is {later[-1].name}); continue "
                 f"from the latest (--resume), or pass --overwrite to continue from step {start} and drop them")
-        for stale in [*later, *(p for p in (folder.path / "vtk").glob("step_*.vtu") if step_of(p) > start)]:
+        for stale in [*later, *(p for p in (folder.path / "vtk").glob("step_*.vtu") if step_of(p) > start),
+                      *earlier_outputs(folder.path, LEFTOVERS)]:
             stale.unlink()
         rows = folder.read_history_rows()
         kept = [row for row in rows if int(row["step"]) < start]

@@ -224,3 +224,23 @@ def test_settings_no_run_can_use_are_refused_when_made(change, message):
 
     with pytest.raises(QPContactError, match=message):
         Settings(**change)
+
+
+def test_a_killed_run_leaves_whole_snapshots_and_resumes_with_a_contiguous_history(tmp_path):
+    """SIGKILL (no chance to save anything): the snapshots written so far are whole (written
+    atomically), the history may run past the last one, and --resume continues from it."""
+    out = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out),
+                                "--quiet", "--snapshot-every", "3", "--max-dt", "0.1"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and len(list((out / "snapshots").glob("step_*.npz"))) < 4:
+        time.sleep(0.02)
+    process.kill()
+    process.wait(timeout=60)
+    snapshots = sorted((out / "snapshots").glob("step_*.npz"))
+    assert all(load_snapshot(p).step == int(p.stem[5:]) for p in snapshots)  # none truncated
+    last = load_snapshot(snapshots[-1]).step
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", str(last + 4)]) == 0
+    assert [int(row["step"]) for row in history(out)] == list(range(last + 4))
+    assert not [p for p in out.rglob(".*.tmp")]
