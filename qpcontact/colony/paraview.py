@@ -7,8 +7,9 @@ the optional extra ``qpcontact[vtk]``) holds, for N cells:
   3N points in all;
 - cells: a ``vertex`` at each centre (N), and a ``line`` from end to end of each axis (N);
 - data on every point and every cell (an end point carries its cell's values): ``axis`` (3,
-  unit vector), ``length`` (cylinder length [µm]), ``radius`` [µm], ``id``, ``parent_id`` (-1 for
-  a founder), ``growth_rate`` [1/doubling time], ``velocity`` (3) [µm/doubling time].
+  unit vector), ``length`` (cylinder length), ``radius``, ``id``, ``parent_id`` (-1 for a
+  founder), ``growth_rate`` [1/time], ``velocity`` (3) — in the colony's units (µm and doubling
+  times in ``qpcontact simulate``).
 
 The ``.pvd`` collection lists the files with their simulated time, so that ParaView plays the
 run as a time series. To see capsules: open ``colony.pvd``, apply *Tube* to the lines with *Vary

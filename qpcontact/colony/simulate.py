@@ -486,8 +486,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     model = parser.add_argument_group("model settings (also in --config; saved in config.toml)")
     defaults = Settings()
     for flag, name, kind, help_, choices in SETTING_FLAGS:
-        model.add_argument(flag, dest=name, type=kind, choices=choices, default=argparse.SUPPRESS,
-                           help=f"{help_} (default: {getattr(defaults, name)!r})")
+        default = getattr(defaults, name)
+        metavar = None if choices else {int: "N", float: "X"}.get(type(default), "FILE" if name == "model" else "NAME")
+        model.add_argument(flag, dest=name, type=kind, choices=choices, default=argparse.SUPPRESS, metavar=metavar,
+                           help=f"{help_} (default: {default!r})")
 
 
 def flags_given(args: argparse.Namespace, values_of: Any) -> dict[str, Any]:

@@ -59,6 +59,8 @@ def measure(label: str, changes: dict[str, Any], cells: int, repeats: int) -> di
     run = None
     for _ in range(max(1, repeats)):
         run = run_colony(dataclasses.replace(Settings(n_cells=cells), **changes), progress=False)
+        if run.interrupted:  # Ctrl-C: run_colony stopped cleanly; the benchmark stops too
+            raise KeyboardInterrupt
         walls.append(run.wall_seconds)
         solves.append(float(np.sum(run.history["solve_seconds"])))
         if run.error or sum(walls) > BUDGET_SECONDS:
