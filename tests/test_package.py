@@ -160,6 +160,7 @@ def test_scs_is_an_extra_not_a_base_dependency():
     assert {"solvers", "vtk", "docs", "test"} <= set(re.findall(r"\w+", project["optional-dependencies"]["all"][0]))
 
 
+@pytest.mark.slow
 def test_the_api_reference_builds_from_the_docstrings(tmp_path):
     pytest.importorskip("pdoc", reason="the API reference needs the extra qpcontact[docs]")
     env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}

@@ -74,6 +74,7 @@ def test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, m
     assert history(tmp_path / "part") == history(tmp_path / "full")  # appended, one row per step
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_simulate_cleanly_and_resume_continues_it(tmp_path):
     """Before: a KeyboardInterrupt traceback, no history, no pictures, no snapshot."""
     out = tmp_path / "run"
@@ -226,6 +227,7 @@ def test_settings_no_run_can_use_are_refused_when_made(change, message):
         Settings(**change)
 
 
+@pytest.mark.slow
 def test_a_killed_run_leaves_whole_snapshots_and_resumes_with_a_contiguous_history(tmp_path):
     """SIGKILL (no chance to save anything): the snapshots written so far are whole (written
     atomically), the history may run past the last one, and --resume continues from it."""
