@@ -2,7 +2,7 @@
 
 Usage (under the benchmark lock, from the repository root):
 
-    flock /tmp/qpcontact-bench.lock python examples/performance_ab.py OLD_CHECKOUT [--sizes ...]
+    flock /tmp/qpcontact-bench.lock python examples/performance_ab.py OLD_CHECKOUT [--sizes 10000,100000]
 
 ``OLD_CHECKOUT`` is a directory holding the ``qpcontact`` package as it was before the change
 (e.g. ``git worktree add /tmp/old 28997b8``... or any copy). For each colony snapshot the script
@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from qpcontact.arguments import comma_list, positive_int
+
 
 def load(root: str | None) -> ModuleType:
     """Import a fresh ``qpcontact`` from ``root`` (None: the installed one)."""
@@ -50,20 +52,23 @@ def median_time(fn: Callable[[], Any], repeats: int) -> tuple[Any, float]:
     return out, float(np.median(times))
 
 
-def main() -> None:
-    p = argparse.ArgumentParser()
-    p.add_argument("old")
-    p.add_argument("--sizes", type=int, nargs="+", default=[10000, 100000])
-    p.add_argument("--dimensions", type=int, nargs="+", default=[2, 3])
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--solvers", nargs="+", default=["osqp/primal", "osqp/contact"])
-    args = p.parse_args()
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    p.add_argument("old", help="a folder holding the qpcontact package as it was before the change")
+    p.add_argument("--sizes", type=comma_list(positive_int), default=[10000, 100000], help="cell counts (default: 10000,100000)")
+    p.add_argument("--dimensions", type=comma_list(int, choices=("2", "3")), default=[2, 3], help="2, 3 or 2,3 (default)")
+    p.add_argument("--repeats", type=positive_int, default=3, help="timed repeats, median kept (default: 3)")
+    p.add_argument("--solvers", type=comma_list(), default=["osqp/primal", "osqp/contact"],
+                   help="comma-separated solver/form (default: osqp/primal,osqp/contact)")
+    p.add_argument("--cache-dir", type=Path, default=Path.home() / ".cache" / "qpcontact-bench",
+                   help="where colony snapshots are cached ('none': not cached) (default: %(default)s)")
+    args = p.parse_args(argv)
     old, new = load(args.old), load(None)
     from qpcontact.resolve import metrics, reference_solution  # the new package from here on
     from qpcontact.solvers import Problem, solve
     from qpcontact.studies.bench import load_scene
 
-    cache = Path.home() / ".cache" / "qpcontact-bench"
+    cache = None if str(args.cache_dir) == "none" else args.cache_dir
     print("| scene | cells | phase | before s | after s | speed-up | same answer |")
     print("|---|---|---|---|---|---|---|")
     for dimensions in args.dimensions:
@@ -104,7 +109,8 @@ def main() -> None:
                 print(f"| {dimensions}D | {n_cells} | {spec} whole → {split.extras.get('blocks')} blocks | {t0:.3g} | "
                       f"{t1:.3g} | {t0 / t1:.2f}× | error {e0:.1e} → {e1:.1e} |")
             sys.stdout.flush()
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -51,3 +51,19 @@ class StepFailedError(SolverFailedError):
     ``result`` holds the unconverged :class:`qpcontact.colony.PositionStepResult` (``converged``
     is False); the caller still holds the cells of the start of the step, which stand.
     """
+
+
+class InvalidSnapshotError(InvalidArgumentError):
+    """A colony snapshot cannot be read: missing, truncated or corrupted, not a qpcontact
+    snapshot, of a newer format version, or holding inconsistent values (wrong shapes or types,
+    non-finite time, ...). The message names the file and what is wrong."""
+
+
+class OutputFolderError(QPContactError, OSError):
+    """An output folder cannot be used: it cannot be written, or it holds the files of another
+    run (pass ``overwrite=True``, ``--overwrite`` on the command line, to replace them)."""
+
+
+class ModelHookError(QPContactError, RuntimeError):
+    """A colony run's model hook (:mod:`qpcontact.colony.hooks`) raised, or returned something it
+    cannot use; the hook's own exception, if any, is the ``__cause__``."""

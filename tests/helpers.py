@@ -108,3 +108,17 @@ def world_operators(cells: qc.Cells, contacts: qc.Contacts) -> tuple[np.ndarray,
         W[7 * c + 3:7 * c + 6, 7 * c + 3:7 * c + 6] = cells.subset([c]).apply_inverse_inertia(np.eye(3))
         W[7 * c + 6, 7 * c + 6] = 1.0 / cells.growth_inertia[c] if np.isfinite(cells.masses[c]) else 0.0
     return J, W
+
+
+def interrupt_on_call(monkeypatch: pytest.MonkeyPatch, module: object, name: str, call: int) -> None:
+    """Make ``module.name`` raise ``KeyboardInterrupt`` (as Ctrl-C would) on its ``call``-th call;
+    the calls before it run as they are."""
+    real, calls = getattr(module, name), []
+
+    def interrupted(*args, **kwargs):
+        calls.append(args)
+        if len(calls) == call:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(module, name, interrupted)

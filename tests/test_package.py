@@ -4,6 +4,7 @@ the documents name files and tests that exist, and the command line lists its co
 from __future__ import annotations
 
 import ast
+import os
 import re
 import subprocess
 import sys
@@ -123,10 +124,11 @@ def test_documents_name_files_and_tests_that_exist(document):
 
 
 def test_cli_lists_commands_and_rejects_unknown_ones(capsys):
-    assert cli.main([]) == 0
+    assert cli.main(["--help"]) == 0
     listing = capsys.readouterr().out
     assert all(command in listing for command in ("demo", "compare", "stability", "simulate", "bench"))
     assert cli.main(["frobnicate"]) == 2
+    assert "invalid choice: 'frobnicate'" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("document", [d for d in DOCUMENTS if d.name not in ("README.md", "architecture.md")
@@ -136,3 +138,37 @@ def test_python_examples_in_the_documents_run(document):
     by tests/solvers/test_registry.py.)"""
     for block in re.findall(r"```python\n(.*?)```", document.read_text(), re.S):
         exec(compile(block, document.name, "exec"), {})
+
+
+def test_license_changelog_and_type_marker_ship_with_the_package():
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    assert (ROOT / "LICENSE").read_text().startswith("MIT License") and project["project"]["license"] == {"text": "MIT"}
+    assert (ROOT / "CHANGELOG.md").read_text().startswith("# Changelog")
+    assert (PACKAGE / "py.typed").exists()
+    assert "py.typed" in project["tool"]["setuptools"]["package-data"]["qpcontact"]
+
+
+def test_scs_is_an_extra_not_a_base_dependency():
+    """SCS (about 140 MB) is installed only with qpcontact[solvers]."""
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert not [d for d in project["dependencies"] if d.lower().startswith("scs")]
+    assert any(d.startswith("scs") for d in project["optional-dependencies"]["solvers"])
+    assert {"solvers", "vtk", "docs", "test"} <= set(re.findall(r"\w+", project["optional-dependencies"]["all"][0]))
+
+
+@pytest.mark.slow
+def test_the_api_reference_builds_from_the_docstrings(tmp_path):
+    pytest.importorskip("pdoc", reason="the API reference needs the extra qpcontact[docs]")
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
+    done = subprocess.run(["bash", str(ROOT / "docs" / "api.sh"), str(tmp_path)], capture_output=True, text=True,
+                          env=env, cwd=ROOT, timeout=300)
+    assert done.returncode == 0 and not done.stderr, done.stderr
+    assert (tmp_path / "index.html").exists()
+    for page in ("qpcontact.html", "qpcontact/colony/runs.html", "qpcontact/colony/snapshots.html",
+                 "qpcontact/colony/hooks.html", "qpcontact/resolve/resolve.html", "qpcontact/solvers/registry.html"):
+        assert (tmp_path / page).stat().st_size > 1000, page
+    assert "load_snapshot" in (tmp_path / "qpcontact" / "colony" / "snapshots.html").read_text()

@@ -114,15 +114,15 @@ def growth_drive(cells: Cells, length_increase: np.ndarray, dt: float) -> np.nda
     return np.where(growing, np.where(growing, cells.growth_inertia, 0.0) * length_increase / dt, 0.0)
 
 
-def divide(colony: Colony, division_length: float, rng: np.random.Generator, *,
+def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.Generator, *,
            axis_noise: float = 0.02, rate_noise: float = 0.0, base_rate: float | None = None,
            planar: bool = False) -> Colony:
     """Split every cell with ``l >= division_length`` into two daughters (module docstring).
 
     Args:
         colony: the colony.
-        division_length: the length threshold [length]; must exceed ``2ρ`` so that daughters
-            get a positive length.
+        division_length: the length threshold [length], one for all or an (N,) array, one per
+            cell; must exceed ``2ρ`` so that daughters get a positive length.
         rng: random numbers for the noise.
         axis_noise: standard deviation of each daughter's axis turn [rad].
         rate_noise: relative standard deviation of a daughter's growth rate around ``base_rate``

@@ -1,18 +1,26 @@
 """Pictures of a colony run (matplotlib's object-oriented API: figures are drawn and saved
 without pyplot, so importing this module leaves the process's matplotlib backend alone).
 
-- :func:`draw_colony`: the cells seen from above (+z), each capsule outlined exactly and
-  coloured by the orientation of its axis in the xy-plane (a cyclic colour map: a rod and its
-  reverse have the same colour).
+- :func:`draw_colony`: the cells seen from above (+z, the x–y plane) or from the side (−y, the
+  x–z plane), each capsule outlined exactly and coloured by the orientation of its axis in the
+  xy-plane (a cyclic colour map: a rod and its reverse have the same colour); static planes
+  (walls, the substrate) seen edge-on in that view are drawn as thick grey lines.
+- :func:`save_colony_picture`: the top view, and with ``side_view`` (3D colonies) a side view
+  under it.
 - :func:`plot_history`: cell count, largest and mean overlap (fraction of the diameter),
-  solver time per step and the solver's residuals against simulated time.
+  solver time per step and the solver's residuals against simulated time. Values that a log
+  axis cannot show (zero: no overlap, no contact) are left out, not drawn at a floor.
 - :func:`animate`: a GIF of saved snapshots (matplotlib's ``PillowWriter``).
+
+Lengths are labelled in µm and time in doubling times, the units of ``qpcontact simulate``
+(``length_unit``/``time_unit`` change the labels).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
@@ -24,11 +32,15 @@ from ..geometry import Cells
 
 #: Points per semicircular cap of a drawn capsule.
 CAP_POINTS = 8
+#: The coordinates each view shows (x, y indices) and the one it looks along.
+VIEWS = {"top": (0, 1, 2), "side": (0, 2, 1)}
 
 
-def capsule_outlines(cells: Cells) -> np.ndarray:
-    """(N, 2·CAP_POINTS, 2) the outline of each capsule projected on the xy-plane [length]."""
-    axis = cells.axes[:, :2]
+def capsule_outlines(cells: Cells, view: str = "top") -> np.ndarray:
+    """(N, 2·CAP_POINTS, 2) the outline of each capsule projected on the view's plane (the
+    x–y plane from the top, x–z from the side) [length]."""
+    i, j, _ = VIEWS[view]
+    axis = cells.axes[:, [i, j]]
     norm = np.linalg.norm(axis, axis=1, keepdims=True)
     axis = np.where(norm > 1e-12, axis / np.where(norm > 0, norm, 1.0), [1.0, 0.0])
     half = 0.5 * cells.lengths[:, None] * norm  # projected half length
@@ -37,24 +49,46 @@ def capsule_outlines(cells: Cells) -> np.ndarray:
     # Cap at the + end sweeps −90°..90° around the axis direction, the − end 90°..270°.
     angles = np.concatenate([angle0[:, None] + cap, angle0[:, None] + np.pi + cap], axis=1)
     ends = np.concatenate([np.repeat(half, CAP_POINTS, axis=1), np.repeat(-half, CAP_POINTS, axis=1)], axis=1)
-    centre = cells.centers[:, None, :2] + ends[:, :, None] * axis[:, None, :]
+    centre = cells.centers[:, None][:, :, [i, j]] + ends[:, :, None] * axis[:, None, :]
     offset = cells.radii[:, None, None] * np.stack([np.cos(angles), np.sin(angles)], axis=2)
     return centre + offset
 
 
-def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: bool = True) -> PolyCollection:
-    """Draw the cells on ``ax`` from above, coloured by axis orientation (0–180°)."""
+def draw_planes(ax: Axes, planes: Sequence[Any], view: str = "top") -> int:
+    """Draw the static planes (:class:`qpcontact.Plane`) that the view sees edge-on (normal in
+    the view's plane) as lines; returns how many were drawn."""
+    i, j, k = VIEWS[view]
+    drawn = 0
+    for plane in planes:
+        normal, point = np.asarray(plane.normal), np.asarray(plane.point)
+        if abs(normal[k]) > 1e-9:
+            continue  # seen face-on or at a slant: it fills the view, nothing to draw
+        start = point[[i, j]]
+        ax.axline(tuple(start), tuple(start + [-normal[j], normal[i]]), color="0.45", lw=3, zorder=0,
+                  label="wall" if drawn == 0 else None)
+        drawn += 1
+    return drawn
+
+
+def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: bool = True, view: str = "top",
+                planes: Sequence[Any] = (), length_unit: str = "µm") -> PolyCollection:
+    """Draw the cells on ``ax`` from above (``view="top"``) or from the side (``"side"``),
+    coloured by axis orientation in the xy-plane (0–180°), with the planes seen edge-on."""
+    i, j, k = VIEWS[view]
     orientation = np.degrees(np.arctan2(cells.axes[:, 1], cells.axes[:, 0])) % 180.0
-    # Cells lower down are drawn first, so the top layer of a 3D biofilm is what one sees.
-    order = np.argsort(cells.centers[:, 2], kind="stable")
-    polys = PolyCollection(list(capsule_outlines(cells)[order]), array=orientation[order], cmap="twilight",
+    # Cells farther from the viewer are drawn first: the top layer of a 3D biofilm from above,
+    # the front row (small y) from the side.
+    order = np.argsort(cells.centers[:, k] if view == "top" else -cells.centers[:, k], kind="stable")
+    polys = PolyCollection(list(capsule_outlines(cells, view)[order]), array=orientation[order], cmap="twilight",
                            edgecolors="k", linewidths=0.2)
     polys.set_clim(0.0, 180.0)
     ax.add_collection(polys)
     ax.set_aspect("equal")
     ax.autoscale_view()
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
+    draw_planes(ax, planes, view)
+    names = "xyz"
+    ax.set_xlabel(f"{names[i]} [{length_unit}]")
+    ax.set_ylabel(f"{names[j]} [{length_unit}]")
     if title:
         ax.set_title(title)
     if colorbar and ax.figure is not None:
@@ -62,43 +96,78 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     return polys
 
 
-def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None) -> Path:
-    """Draw the colony and save it as an image (PNG, SVG, ... by the file suffix)."""
-    fig = Figure(figsize=(7, 6), dpi=120)
-    draw_colony(fig.subplots(), cells, title=title)
-    fig.tight_layout()
+def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None, *, side_view: bool = False,
+                        planes: Sequence[Any] = ()) -> Path:
+    """Draw the colony from above (and, with ``side_view``, from the side under it) and save it
+    as an image (PNG, SVG, ... by the file suffix). The figure's height follows the colony's
+    shape (a colony in a channel is a strip)."""
+    fig = Figure(figsize=(7, 6), dpi=120, layout="constrained")
+    if not side_view:
+        top = fig.subplots()
+        draw_colony(top, cells, planes=planes)
+        height = 0.0
+    else:
+        top, side = fig.subplots(2, 1)
+        polys = draw_colony(top, cells, planes=planes, colorbar=False)
+        draw_colony(side, cells, title="side view (from −y)", planes=planes, view="side", colorbar=False)
+        # The same x range as the top view, and at least a quarter of it in height (a flat
+        # biofilm is a thin strip otherwise), from just below the lowest cell or plane.
+        x_range = top.get_xlim()
+        z = capsule_outlines(cells, "side")[..., 1]
+        bottom = min([float(z.min())] + [p.point[2] for p in planes if abs(p.normal[1]) < 1e-9]) - 0.3
+        height = max(float(z.max()) + 0.3 - bottom, 0.25 * (x_range[1] - x_range[0]))
+        side.set_xlim(*x_range)
+        side.set_ylim(bottom, bottom + height)
+        top.get_gridspec().set_height_ratios([top.get_ylim()[1] - top.get_ylim()[0], height])
+        fig.colorbar(polys, ax=[top, side], label="axis orientation in the xy-plane [deg]", shrink=0.8)
+    x_range, y_range = top.get_xlim(), top.get_ylim()
+    ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
+    fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))
+    if title:
+        fig.suptitle(title, fontsize=10)
     fig.savefig(path)
     return Path(path)
+
+
+def positive(values: Sequence[float]) -> np.ndarray:
+    """The values as floats, with those a log axis cannot show (≤ 0, NaN) as NaN: not drawn."""
+    array = np.asarray(values, dtype=float)
+    return np.where(array > 0, array, np.nan)
+
+
+def history_figure(history: Mapping[str, Sequence[float]], title: str | None = None, time_unit: str = "doubling times") -> Figure:
+    """The four panels of :func:`plot_history` as a figure."""
+    t = np.asarray(history["time"])
+    fig = Figure(figsize=(10, 7), dpi=110, layout="constrained")
+    axes = fig.subplots(2, 2, sharex=True)
+    axes[0, 0].semilogy(t, positive(history["cells"]))
+    axes[0, 0].set_ylabel("cells")
+    axes[0, 1].semilogy(t, positive(history["max_overlap"]), label="largest", lw=0.8)
+    axes[0, 1].semilogy(t, positive(history["mean_overlap"]), label="mean (overlapping contacts)", lw=0.8)
+    axes[0, 1].set_ylabel("overlap [fraction of the diameter]")
+    axes[0, 1].legend()
+    axes[1, 0].semilogy(t, positive(history["solve_seconds"]))
+    axes[1, 0].set_ylabel("contact solve per step [s]")
+    for key in ("penetration", "complementarity"):
+        if key in history and len(history[key]):
+            axes[1, 1].semilogy(t, positive(history[key]), label=key, lw=0.8)
+    axes[1, 1].set_ylabel("solver residual [dimensionless, scaled]")
+    axes[1, 1].legend()
+    for ax in axes[1]:
+        ax.set_xlabel(f"time [{time_unit}]")
+    fig.supxlabel("steps without overlap, contacts or residual have no point on the log axes", fontsize=7, color="0.4")
+    if title:
+        fig.suptitle(title)
+    return fig
 
 
 def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title: str | None = None) -> Path:
     """Four panels against simulated time: cell count; largest and mean overlap as a fraction
     of the diameter; solver time per step [s]; the solver's penetration and complementarity
     residuals. ``history`` holds equal-length sequences ``time``, ``cells``, ``max_overlap``,
-    ``mean_overlap``, ``solve_seconds``, ``penetration`` and (optionally) ``complementarity``."""
-    t = np.asarray(history["time"])
-    fig = Figure(figsize=(10, 7), dpi=110)
-    axes = fig.subplots(2, 2, sharex=True)
-    axes[0, 0].semilogy(t, history["cells"])
-    axes[0, 0].set_ylabel("cells")
-    axes[0, 1].semilogy(t, np.maximum(history["max_overlap"], 1e-6), label="largest", lw=0.8)
-    axes[0, 1].semilogy(t, np.maximum(history["mean_overlap"], 1e-6), label="mean (overlapping contacts)", lw=0.8)
-    axes[0, 1].set_ylabel("overlap / diameter")
-    axes[0, 1].legend()
-    axes[1, 0].semilogy(t, np.maximum(history["solve_seconds"], 1e-6))
-    axes[1, 0].set_ylabel("contact solve per step [s]")
-    for key in ("penetration", "complementarity"):
-        if key in history and len(history[key]):
-            values = np.asarray(history[key], dtype=float)
-            axes[1, 1].semilogy(t, np.maximum(values, 1e-16), label=key, lw=0.8)
-    axes[1, 1].set_ylabel("residual (scaled)")
-    axes[1, 1].legend()
-    for ax in axes[1]:
-        ax.set_xlabel("time")
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path)
+    ``mean_overlap``, ``solve_seconds``, ``penetration`` and (optionally) ``complementarity``.
+    Zeros (no overlap, no contact) are not drawn (:func:`positive`)."""
+    history_figure(history, title).savefig(path)
     return Path(path)
 
 
@@ -113,7 +182,7 @@ def animate(path: str | Path, frames: Sequence[tuple[float, Cells]], fps: int = 
     def draw(i: int) -> None:
         ax.clear()
         time, cells = frames[i]
-        draw_colony(ax, cells, title=f"t = {time:.2f}, {cells.n} cells", colorbar=False)
+        draw_colony(ax, cells, title=f"t = {time:.2f} doubling times, {cells.n} cells", colorbar=False)
         ax.set_xlim(lo[0] - pad, hi[0] + pad)
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
 

@@ -1,53 +1,114 @@
-"""Colony snapshots as NPZ files (one per saved step), loadable back into a :class:`Colony`; and
-the one mapping between :class:`~qpcontact.Cells` and NPZ arrays (:func:`cell_arrays`,
-:func:`cells_from_arrays`), which the benchmark's scene cache uses too (:func:`save_cells`,
-:func:`load_cells`: the cell arrays alone, same names).
+"""Colony snapshots as NPZ files (one per saved step), loadable back into a :class:`Colony` and,
+with the run's settings, step index and random-generator state, enough to continue a run
+exactly (:mod:`qpcontact.colony.runs`); and the one mapping between :class:`~qpcontact.Cells`
+and NPZ arrays (:func:`cell_arrays`, :func:`cells_from_arrays`), which the benchmark's scene
+cache uses too (:func:`save_cells`, :func:`load_cells`: the cell arrays alone, same names).
 
-Format (``numpy.savez_compressed``; every array is plain NumPy, no pickles):
+Format (``numpy.savez_compressed``; every array is plain NumPy, no pickles), version 2:
 
-===================  ===========  ==========================================================
-key                  shape        meaning
-===================  ===========  ==========================================================
-``format``           ()           the string ``"qpcontact-colony"``
-``version``          ()           format version (int, currently 1)
-``time``             ()           simulated time [time]
-``step``             ()           step index (int; -1 if unknown)
-``next_id``          ()           the id the next newborn cell gets
-``centers``          (N, 3)       :class:`qpcontact.Cells` fields, same names and units
-``axes``             (N, 3)
-``lengths``          (N,)
-``radii``            (N,)
-``masses``           (N,)         ``inf`` = fixed cell
-``growth_inertia``   (N,)         ``inf`` = non-growing cell
-``momenta``          (N, 3)
-``angular_momenta``  (N, 3)
-``growth_momenta``   (N,)
-``ids``              (N,)         cell ids (int64)
-``parent_ids``       (N,)         mother's id, -1 for a founder
-``rates``            (N,)         growth rate [1/time]
-``owed``             (N,)         length still owed from division [length]
-===================  ===========  ==========================================================
+=====================  ===========  =========================================================
+key                    shape        meaning
+=====================  ===========  =========================================================
+``format``             ()           the string ``"qpcontact-colony"``
+``version``            ()           format version (integer: 2; version 1 files still load)
+``time``               ()           simulated time [time], finite
+``step``               ()           step index (integer >= -1; -1 if unknown): the number of
+                                    steps taken to reach this state
+``next_id``            ()           the id the next newborn cell gets (integer)
+``centers``            (N, 3)       :class:`qpcontact.Cells` fields, same names and units
+``axes``               (N, 3)
+``lengths``            (N,)
+``radii``              (N,)
+``masses``             (N,)         ``inf`` = fixed cell
+``growth_inertia``     (N,)         ``inf`` = non-growing cell
+``momenta``            (N, 3)
+``angular_momenta``    (N, 3)
+``growth_momenta``     (N,)
+``ids``                (N,)         cell ids (integer dtype, >= 0, unique)
+``parent_ids``         (N,)         mother's id (integer dtype), -1 for a founder
+``rates``              (N,)         growth rate [1/time], finite, >= 0
+``owed``               (N,)         length still owed from division [length], finite, >= 0
+*optional (version 2)*
+``settings``           ()           JSON object (a string): the run's settings
+                                    (:class:`qpcontact.colony.Settings` fields)
+``rng_state``          ()           JSON object (a string): the random generator's state,
+                                    ``numpy.random.Generator.bit_generator.state``
+``extra.<name>``       any          extra per-run state, arrays keyed by name (letters,
+                                    digits, ``_ . -``), e.g. a solver's warm-start data;
+                                    numeric or boolean, no objects
+``qpcontact_version``  ()           the qpcontact version that wrote the file (information)
+=====================  ===========  =========================================================
 
-Read one with plain NumPy (``np.load(path)["centers"]``) or with :func:`load_colony`.
+Version 1 is the same without the optional keys. A run can start from either
+(``qpcontact simulate --start FILE``): from version 1, or a file without ``rng_state``, the
+random generator starts from the run's seed. Other tools may write either version.
+
+Snapshots are written through a temporary file and a rename (:func:`qpcontact.outputs.atomic_write`),
+so a killed process never leaves a truncated one. :func:`load_snapshot` checks everything above
+and raises :class:`~qpcontact.errors.InvalidSnapshotError` naming the file and the problem for a
+missing, truncated, corrupted or inconsistent file.
+
+Read one with plain NumPy (``np.load(path)["centers"]``), with :func:`load_colony` (the colony
+and its step) or with :func:`load_snapshot` (everything).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import importlib.metadata
+import json
+import re
+import zipfile
+import zlib
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidArgumentError
+from ..errors import InvalidSnapshotError, QPContactError
 from ..geometry import Cells
+from ..outputs import atomic_write
 from .growth import Colony
 
 FORMAT = "qpcontact-colony"
-VERSION = 1
+VERSION = 2
+#: Versions :func:`load_snapshot` reads.
+SUPPORTED_VERSIONS = (1, 2)
 CELL_FIELDS = tuple(f.name for f in dataclasses.fields(Cells))
 COLONY_FIELDS = ("ids", "parent_ids", "rates", "owed")
+SCALAR_FIELDS = ("time", "step", "next_id")
+#: Prefix of the keys of the extra arrays.
+EXTRA_PREFIX = "extra."
+_EXTRA_NAME = re.compile(r"[A-Za-z0-9_.\-]+")
+
+
+@dataclass
+class Snapshot:
+    """Everything a snapshot holds (:func:`load_snapshot`).
+
+    Attributes:
+        colony: the colony.
+        step: the step index (-1 if unknown).
+        settings: the run's settings as a plain mapping (None if not stored).
+        rng_state: ``bit_generator.state`` of the run's random generator (None if not stored).
+        extra: the extra arrays, by name.
+        version: the file's format version.
+        path: where it was read from.
+    """
+
+    colony: Colony
+    step: int
+    settings: dict[str, Any] | None = None
+    rng_state: dict[str, Any] | None = None
+    extra: dict[str, np.ndarray] = field(default_factory=dict)
+    version: int = VERSION
+    path: Path | None = None
+
+    def generator(self) -> np.random.Generator | None:
+        """A random generator in the stored state (None if none is stored)."""
+        return None if self.rng_state is None else restore_generator(self.rng_state, self.path)
 
 
 def cell_arrays(cells: Cells) -> dict[str, Any]:
@@ -60,50 +121,195 @@ def cells_from_arrays(data: Mapping[str, Any]) -> Cells:
     return Cells(**{name: data[name] for name in CELL_FIELDS})
 
 
-def save_cells(path: str | Path, cells: Cells) -> Path:
-    """Write the cell arrays alone to ``path`` (``.npz``, uncompressed; parent folders are
-    created). Written to a temporary file first, so a reader never sees half a file."""
+def npz_path(path: str | Path) -> Path:
+    """``path`` with ``.npz`` appended unless it ends so (as NumPy does when it saves)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, **cell_arrays(cells))
-    tmp.replace(path)
-    return path
+    return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
+
+
+def save_cells(path: str | Path, cells: Cells) -> Path:
+    """Write the cell arrays alone to ``path`` (``.npz`` appended if missing; uncompressed; parent
+    folders are created), atomically. Returns the path written."""
+    return atomic_write(npz_path(path), lambda fh: np.savez(fh, **cell_arrays(cells)))
 
 
 def load_cells(path: str | Path) -> Cells:
-    """Read cells written by :func:`save_cells` (or the cell arrays of a colony snapshot)."""
-    with np.load(Path(path), allow_pickle=False) as data:
-        return cells_from_arrays(data)
+    """Read cells written by :func:`save_cells` (or the cell arrays of a colony snapshot).
+
+    Raises:
+        InvalidSnapshotError: the file is missing, corrupted or misses a cell array.
+    """
+    data = read_npz(path)
+    _require(path, data, CELL_FIELDS)
+    return _checked(path, lambda: cells_from_arrays(data))
 
 
-def save_colony(path: str | Path, colony: Colony, step: int = -1) -> Path:
-    """Write ``colony`` to ``path`` (an ``.npz`` file; parent folders are created)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    arrays = cell_arrays(colony.cells)
+def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: Mapping[str, Any] | None = None,
+                rng: np.random.Generator | Mapping[str, Any] | None = None,
+                extra: Mapping[str, Any] | None = None) -> Path:
+    """Write ``colony`` to ``path`` (format version 2, module docstring), atomically.
+
+    Args:
+        path: the file; ``.npz`` is appended unless it ends so. Parent folders are created.
+        colony: the colony.
+        step: its step index (-1: unknown).
+        settings: the run's settings (JSON-serialisable values), stored to continue the run.
+        rng: the run's random generator (or its ``bit_generator.state``), stored to continue the
+            run on the same random numbers.
+        extra: extra arrays by name (e.g. a solver's warm-start data).
+
+    Returns:
+        The path written.
+    """
+    path = npz_path(path)
+    arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION), "time": np.array(float(colony.time)),
+                              "step": np.array(int(step), dtype=np.int64), "next_id": np.array(colony.next_id, dtype=np.int64),
+                              "qpcontact_version": np.array(_writer_version())}
+    arrays.update(cell_arrays(colony.cells))
     arrays.update({name: getattr(colony, name) for name in COLONY_FIELDS})
-    np.savez_compressed(path, format=np.array(FORMAT), version=np.array(VERSION), time=np.array(colony.time),
-                        step=np.array(step), next_id=np.array(colony.next_id), **arrays)
-    return path
+    if settings is not None:
+        arrays["settings"] = np.array(json.dumps(dict(settings)))
+    if rng is not None:
+        state = rng.bit_generator.state if isinstance(rng, np.random.Generator) else dict(rng)
+        arrays["rng_state"] = np.array(json.dumps(state))
+    for name, value in (extra or {}).items():
+        value = np.asarray(value)
+        if not (isinstance(name, str) and _EXTRA_NAME.fullmatch(name)) or value.dtype.hasobject:
+            raise InvalidSnapshotError(f"{path}: extra array {name!r}: names are letters, digits and _ . -, "
+                                       "values numeric or boolean arrays")
+        arrays[EXTRA_PREFIX + name] = value
+    return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
 
 
 def load_colony(path: str | Path) -> tuple[Colony, int]:
-    """Read a snapshot written by :func:`save_colony`. Returns ``(colony, step)``.
+    """Read a snapshot (version 1 or 2). Returns ``(colony, step)``; :func:`load_snapshot` gives
+    everything.
 
     Raises:
-        InvalidArgumentError: the file is not a qpcontact colony snapshot, or of a newer version,
-            or misses a field.
+        InvalidSnapshotError: see :func:`load_snapshot`.
     """
-    with np.load(Path(path), allow_pickle=False) as data:
-        if "format" not in data or str(data["format"]) != FORMAT:
-            raise InvalidArgumentError(f"{path}: not a {FORMAT} snapshot")
-        if int(data["version"]) > VERSION:
-            raise InvalidArgumentError(f"{path}: snapshot version {int(data['version'])} is newer than this qpcontact ({VERSION})")
-        missing = [k for k in (*CELL_FIELDS, *COLONY_FIELDS, "time", "step", "next_id") if k not in data]
-        if missing:
-            raise InvalidArgumentError(f"{path}: snapshot misses {missing}")
-        cells = cells_from_arrays(data)
-        colony = Colony(cells, data["ids"], data["parent_ids"], data["rates"], data["owed"],
-                        time=float(data["time"]), next_id=int(data["next_id"]))
-        return colony, int(data["step"])
+    snapshot = load_snapshot(path)
+    return snapshot.colony, snapshot.step
+
+
+def read_npz(path: str | Path) -> dict[str, np.ndarray]:
+    """Every array of an NPZ file (no pickles), read now.
+
+    Raises:
+        InvalidSnapshotError: the file is missing, unreadable, truncated or corrupted, or is
+            not an NPZ file.
+    """
+    try:
+        with np.load(Path(path), allow_pickle=False) as data:
+            if not isinstance(data, np.lib.npyio.NpzFile):
+                raise InvalidSnapshotError(f"{path}: a single .npy array, not an NPZ snapshot")
+            return {name: data[name] for name in data.files}
+    except InvalidSnapshotError:
+        raise
+    except FileNotFoundError:
+        raise InvalidSnapshotError(f"{path}: no such file") from None
+    except (OSError, EOFError, ValueError, zipfile.BadZipFile, zlib.error, KeyError) as exc:
+        # np.load of a file that is no NPZ (e.g. 1 byte) falls back to a pickle, refused: ValueError.
+        reason = "not an NPZ file" if "pickle" in str(exc) else f"{type(exc).__name__}: {exc}"
+        raise InvalidSnapshotError(f"{path}: cannot be read, truncated or corrupted ({reason})") from None
+
+
+def load_snapshot(path: str | Path) -> Snapshot:
+    """Read and check a snapshot (version 1 or 2, module docstring).
+
+    Raises:
+        InvalidSnapshotError: the file is missing, truncated or corrupted; not a qpcontact colony
+            snapshot; of a newer version; misses a field; or holds inconsistent values (NaN
+            time, a step or ids that are not integers, cells or lineage that fail their checks,
+            settings or random state that are not JSON objects, ...).
+    """
+    data = read_npz(path)
+    if "format" not in data or data["format"].dtype.kind != "U" or str(data["format"]) != FORMAT:
+        raise InvalidSnapshotError(f"{path}: not a {FORMAT} snapshot")
+    version = _integer(path, data, "version")
+    if version not in SUPPORTED_VERSIONS:
+        newer = " (newer than this qpcontact)" if version > VERSION else ""
+        raise InvalidSnapshotError(f"{path}: snapshot version {version}{newer}; this qpcontact reads versions "
+                                   f"{', '.join(map(str, SUPPORTED_VERSIONS))}")
+    _require(path, data, (*CELL_FIELDS, *COLONY_FIELDS, *SCALAR_FIELDS))
+    time = data["time"]
+    if time.shape != () or time.dtype.kind not in "fiu" or not np.isfinite(time):
+        raise InvalidSnapshotError(f"{path}: time must be a finite number, got {time!r}")
+    step = _integer(path, data, "step")
+    if step < -1:
+        raise InvalidSnapshotError(f"{path}: step must be >= -1, got {step}")
+    next_id = _integer(path, data, "next_id")
+    for name in ("ids", "parent_ids"):
+        if data[name].dtype.kind not in "iu":
+            raise InvalidSnapshotError(f"{path}: {name} must be integers, got dtype {data[name].dtype}")
+    for name in (*CELL_FIELDS, "rates", "owed"):
+        if data[name].dtype.kind not in "fiu":
+            raise InvalidSnapshotError(f"{path}: {name} must be numbers, got dtype {data[name].dtype}")
+    if np.any(data["ids"] < 0) or np.any(data["parent_ids"] < -1):
+        raise InvalidSnapshotError(f"{path}: ids must be >= 0 and parent_ids >= -1")
+    colony = _checked(path, lambda: Colony(cells_from_arrays(data), data["ids"], data["parent_ids"], data["rates"],
+                                           data["owed"], time=float(time), next_id=next_id))
+    snapshot = Snapshot(colony, step, _json_object(path, data, "settings"), _json_object(path, data, "rng_state"),
+                        {k[len(EXTRA_PREFIX):]: v for k, v in data.items() if k.startswith(EXTRA_PREFIX)}, version,
+                        Path(path))
+    if snapshot.rng_state is not None:
+        snapshot.generator()  # checked now, not when the run is half set up
+    return snapshot
+
+
+def restore_generator(state: Mapping[str, Any], path: str | Path | None = None) -> np.random.Generator:
+    """A ``numpy.random.Generator`` in the given ``bit_generator.state``.
+
+    Raises:
+        InvalidSnapshotError: not the state of one of NumPy's bit generators.
+    """
+    name = state.get("bit_generator") if isinstance(state, Mapping) else None
+    kind = getattr(np.random, name, None) if isinstance(name, str) else None
+    if not (isinstance(kind, type) and issubclass(kind, np.random.BitGenerator)):
+        raise InvalidSnapshotError(f"{path}: rng_state names no NumPy bit generator ({name!r})")
+    bit_generator = kind()
+    try:
+        bit_generator.state = dict(state)
+    except (TypeError, ValueError, KeyError, OverflowError) as exc:
+        raise InvalidSnapshotError(f"{path}: rng_state is not a valid {name} state ({exc})") from None
+    return np.random.Generator(bit_generator)
+
+
+def _writer_version() -> str:
+    try:
+        return importlib.metadata.version("qpcontact")
+    except importlib.metadata.PackageNotFoundError:  # run from a source tree that is not installed
+        return "unknown"
+
+
+def _require(path: str | Path, data: Mapping[str, Any], names: tuple[str, ...]) -> None:
+    missing = [name for name in names if name not in data]
+    if missing:
+        raise InvalidSnapshotError(f"{path}: misses {', '.join(missing)}")
+
+
+def _integer(path: str | Path, data: Mapping[str, np.ndarray], name: str) -> int:
+    value = data[name]
+    if value.shape != () or value.dtype.kind not in "iu":
+        raise InvalidSnapshotError(f"{path}: {name} must be an integer, got {value!r}")
+    return int(value)
+
+
+def _json_object(path: str | Path, data: Mapping[str, np.ndarray], name: str) -> dict[str, Any] | None:
+    if name not in data:
+        return None
+    try:
+        value = json.loads(str(data[name])) if data[name].dtype.kind == "U" and data[name].shape == () else None
+    except json.JSONDecodeError:
+        value = None
+    if not isinstance(value, dict):
+        raise InvalidSnapshotError(f"{path}: {name} must be a JSON object (a string)")
+    return value
+
+
+def _checked(path: str | Path, build: Any) -> Any:
+    """``build()``, with the cells' and colony's own checks reported as a bad snapshot."""
+    try:
+        return build()
+    except QPContactError as exc:
+        raise InvalidSnapshotError(f"{path}: {exc}") from None

@@ -52,6 +52,9 @@ KNOWN_BACKENDS = (
 TIME_LIMITED = ("clarabel", "highs", "osqp", "scs")
 #: Backends installed with qpcontact itself (required dependencies in pyproject.toml).
 BUNDLED = ("clarabel", "osqp")
+#: Backends that print to the process's stdout whatever their options say: OSQP ("Polishing not
+#: needed"), HiGHS (its banner, once per process: in every child of the studies).
+CHATTY = ("osqp", "highs")
 
 
 def tolerance_settings(backend: str, tolerance: float, time_limit: float | None,
@@ -148,8 +151,9 @@ def _status(solution: qpsolvers.Solution) -> tuple[str, int | None]:
 
 @contextlib.contextmanager
 def _quiet_stdout() -> Iterator[None]:
-    """Silence the C library's own prints for the duration (OSQP writes "Polishing not
-    needed" to the process's stdout even with ``verbose=False``)."""
+    """Silence the C library's own prints for the duration (:data:`CHATTY`: OSQP writes
+    "Polishing not needed" to the process's stdout even with ``verbose=False``, HiGHS its banner
+    when its first solver object is made, before any option applies)."""
     sys.stdout.flush()
     saved = os.dup(1)
     try:
@@ -182,7 +186,7 @@ def solve_backend(backend: str, problem: Problem, formulation: str, form: str, *
         qp = qpsolvers.Problem(*(_dense(m) for m in qp.unpack()))
     t1 = time.perf_counter()
     try:
-        with warnings.catch_warnings(), (_quiet_stdout() if backend == "osqp" else contextlib.nullcontext()):
+        with warnings.catch_warnings(), (_quiet_stdout() if backend in CHATTY else contextlib.nullcontext()):
             warnings.simplefilter("ignore")  # the status is reported in the output instead
             solution = qpsolvers.solve_problem(qp, solver=backend, verbose=False, **options)
     except Exception as exc:  # backends raise many types; the failure is reported, not hidden

@@ -26,8 +26,10 @@ between the markers ``<!-- bench:start -->`` / ``<!-- bench:end -->`` of the Mar
 rest of the file, e.g. the analysis in docs/performance.md, is kept), the raw numbers to JSON.
 ``--profile`` writes a cProfile of one step of the largest snapshot.
 
-Example: ``flock /tmp/qpcontact-bench.lock qpcontact bench`` (full run, several minutes);
-``qpcontact bench --quick --out-dir /tmp/b`` (seconds).
+Outputs go to ``--out`` (default ``./bench-out``): ``performance.md``, ``img/performance.png``,
+``data/performance.json``. Example: ``flock /tmp/qpcontact-bench.lock qpcontact bench --out docs
+--overwrite`` (full run, several minutes, updates the project's docs); ``qpcontact bench --quick``
+(seconds).
 """
 
 from __future__ import annotations
@@ -51,9 +53,12 @@ from typing import Any
 
 import numpy as np
 
+from ..arguments import add_output_arguments, comma_list, non_negative_int, positive_float, positive_int, run_standalone
 from ..assembly import ContactSystem, build_system
 from ..colony.snapshots import load_cells, save_cells
+from ..errors import OutputFolderError
 from ..geometry import Cells, colliding, find_contacts
+from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import active_set_polish, metrics, reference_solution, solve_system
 from ..solvers import available_solvers, get_solver, solve_min_norm
 from . import scenes
@@ -381,8 +386,7 @@ def write_markdown(path: Path, table: str, image: Path) -> None:
         text = head + block + rest.split(MARK_END, 1)[1]
     else:
         text = text.rstrip("\n") + "\n\n" + block + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(text)
+    write_text(path, text)
 
 
 def profile_step(dimensions: int, n_cells: int, seed: int, solver: str, tolerance: float, cache_dir: Path | None, out: Path) -> str:
@@ -434,35 +438,65 @@ def _too_slow(previous: dict[str, Any] | None, n_cells: int, solvers: list[str],
     return out
 
 
-def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="qpcontact bench", description=__doc__.split("\n\n")[0])
-    p.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000], help="cell counts")
-    p.add_argument("--dimensions", type=int, nargs="+", default=[2, 3], choices=[2, 3], help="2D monolayers, 3D biofilms or both")
-    p.add_argument("--repeats", type=int, default=3, help="timed repeats of each phase (median, min, max)")
-    p.add_argument("--solvers", nargs="+", default=list(DEFAULT_SOLVERS),
-                   help=f"solvers ({', '.join(available_solvers(include_baselines=True))}) with an optional /FORM "
-                        "(e.g. linear/primal: LSMR instead of LU; osqp/contact); @TOL sets that solver's tolerance "
-                        "(e.g. clarabel/primal@1e-9)")
-    p.add_argument("--tolerance", type=float, default=TARGET_ERROR, help="tolerance handed to the solvers")
-    p.add_argument("--time-limit", type=float, default=120.0, help="seconds per QP solve, where the backend supports it")
-    p.add_argument("--slow-limit", type=float, default=120.0,
+def solver_spec(text: str) -> str:
+    """A ``--solvers`` item ``name[/form][@tolerance]``, checked: an installed solver (or baseline),
+    a form it takes, a positive tolerance."""
+    head, at, tolerance = text.partition("@")
+    name, _, form = head.partition("/")
+    if at:
+        positive_float(tolerance)
+    if name not in available_solvers(include_baselines=True):
+        raise argparse.ArgumentTypeError(f"unknown or uninstalled solver {name!r}; known: "
+                                         f"{', '.join(available_solvers(include_baselines=True))}")
+    if form and form not in get_solver(name).forms:
+        raise argparse.ArgumentTypeError(f"solver {name!r} takes the forms {', '.join(get_solver(name).forms)}, not {form!r}")
+    return text
+
+
+#: The files ``qpcontact bench`` writes, relative to ``--out``.
+OUTPUTS = ("performance.md", "img/performance.png", "data/performance.json")
+PROFILE_OUTPUTS = ("data/performance-profile.prof", "data/performance-profile.txt")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``qpcontact bench``."""
+    p.description = ("Time each phase of a contact step (detection, assembly, each solver, the checks) on 2D and 3D "
+                     "colony snapshots, verify every answer, and write performance.md (the table between the markers "
+                     "<!-- bench:start --> and <!-- bench:end --> of an existing file, the rest kept), "
+                     "img/performance.png and data/performance.json into --out. --out docs --overwrite updates the "
+                     "project's docs/performance.md.")
+    p.add_argument("--sizes", type=comma_list(positive_int), default=[1000, 10000, 100000], metavar="LIST",
+                   help="comma-separated cell counts (default: 1000,10000,100000; --quick: 300,1000)")
+    p.add_argument("--dimensions", type=comma_list(int, choices=("2", "3")), default=[2, 3], metavar="LIST",
+                   help="2 (monolayers), 3 (biofilms) or 2,3 (default: 2,3)")
+    p.add_argument("--repeats", type=positive_int, default=3, help="timed repeats of each phase; median, min and max "
+                   "are reported (default: 3; --quick: 2)")
+    p.add_argument("--solvers", type=comma_list(solver_spec), default=list(DEFAULT_SOLVERS), metavar="LIST",
+                   help="comma-separated solvers, each name[/FORM][@TOL]: FORM picks a form (linear/primal: LSMR "
+                        "instead of LU; osqp/contact), TOL that solver's tolerance (clarabel/primal@1e-9) "
+                        f"(default: {','.join(DEFAULT_SOLVERS)}; installed: "
+                        f"{', '.join(available_solvers(include_baselines=True))})")
+    p.add_argument("--tolerance", type=positive_float, default=TARGET_ERROR,
+                   help=f"tolerance handed to the solvers [dimensionless, scaled units] (default: {TARGET_ERROR:g})")
+    p.add_argument("--time-limit", type=positive_float, default=120.0,
+                   help="time limit per QP solve [s], where the backend takes one (default: 120)")
+    p.add_argument("--slow-limit", type=positive_float, default=120.0,
                    help="skip a solver at the next size when its extrapolated time exceeds this [s] (exponent 1.5 for "
-                        "iterative solvers, 2 for factorizations in 2D, 3 in 3D)")
-    p.add_argument("--seed", type=int, default=0)
+                        "iterative solvers, 2 for factorizations in 2D, 3 in 3D) (default: 120)")
+    p.add_argument("--seed", type=non_negative_int, default=0, help="random seed of the snapshots (default: 0)")
     p.add_argument("--quick", action="store_true", help="tiny sizes (300, 1000), 2 repeats: a smoke test in seconds")
-    p.add_argument("--out-dir", type=Path, default=Path("docs"),
-                   help="writes performance.md (table between markers), img/performance.png, data/performance.json")
+    add_output_arguments(p, "bench", "performance.md, img/performance.png and data/performance.json")
     p.add_argument("--cache-dir", type=Path, default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "qpcontact-bench",
-                   help="where colony snapshots are cached ('none' to disable)")
+                   metavar="FOLDER", help="where colony snapshots are cached ('none' to disable) (default: %(default)s)")
     p.add_argument("--profile", action="store_true",
                    help="also write a cProfile of one step of the largest 2D snapshot (data/performance-profile.*)")
-    p.add_argument("--profile-solver", default="osqp/contact")
-    p.add_argument("--worker", nargs=2, type=int, metavar=("DIMENSIONS", "N_CELLS"), help=argparse.SUPPRESS)
-    return p
+    p.add_argument("--profile-solver", type=solver_spec, default="osqp/contact",
+                   help="the solver of --profile (default: osqp/contact)")
+    p.add_argument("--worker", nargs=2, type=positive_int, metavar=("DIMENSIONS", "N_CELLS"), help=argparse.SUPPRESS)
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+def run_command(args: argparse.Namespace) -> int:
+    """``qpcontact bench``."""
     cache = None if str(args.cache_dir) == "none" else args.cache_dir
     if args.quick:
         args.sizes, args.repeats = [300, 1000], 2
@@ -472,6 +506,13 @@ def main(argv: list[str] | None = None) -> int:
                               tolerance=args.tolerance, time_limit=args.time_limit, cache_dir=cache)
         print(json.dumps(record))
         return 0
+    out = args.out
+    outputs = OUTPUTS + (PROFILE_OUTPUTS if args.profile else ())
+    # performance.md keeps everything but its table: an existing one is updated, not replaced.
+    prepare_folder(out, [name for name in outputs if name != "performance.md"], overwrite=args.overwrite)
+    if (out / "performance.md").exists() and not args.overwrite:
+        raise OutputFolderError(f"{out} holds performance.md of an earlier run; pass --overwrite to update its "
+                                "table, or choose another output folder")
     records = []
     common = ["--repeats", str(args.repeats), "--seed", str(args.seed), "--tolerance", repr(args.tolerance),
               "--time-limit", repr(args.time_limit), "--cache-dir", str(args.cache_dir)]
@@ -483,7 +524,7 @@ def main(argv: list[str] | None = None) -> int:
             skipped = _too_slow(previous, n, args.solvers, args.slow_limit)
             run = [spec for spec in args.solvers if spec not in skipped]
             proc = subprocess.run([sys.executable, "-m", "qpcontact.studies.bench", "--worker", str(dimensions), str(n), *common,
-                                   "--solvers", *run], capture_output=True, text=True)
+                                   "--solvers", ",".join(run)], capture_output=True, text=True)
             if proc.returncode != 0:
                 print(proc.stderr, file=sys.stderr)
                 print(f"bench: worker for {dimensions}D, {n} cells failed (exit {proc.returncode})", file=sys.stderr)
@@ -495,23 +536,27 @@ def main(argv: list[str] | None = None) -> int:
     meta = {
         "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
         "machine": machine_description(),
-        "command": "qpcontact bench " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "command": (f"qpcontact bench --sizes {','.join(map(str, args.sizes))} --dimensions "
+                    f"{','.join(map(str, args.dimensions))} --repeats {args.repeats} --solvers {','.join(args.solvers)}"),
         "repeats": args.repeats,
     }
-    out = args.out_dir
     table = markdown(records, meta)
     image = out / "img" / "performance.png"
     plot(records, image)
     write_markdown(out / "performance.md", table, image)
-    (out / "data").mkdir(parents=True, exist_ok=True)
-    (out / "data" / "performance.json").write_text(json.dumps({"meta": meta, "records": records}, indent=1))
+    write_text(out / "data" / "performance.json", json.dumps({"meta": meta, "records": records}, indent=1))
     if args.profile:
         dimensions = 2 if 2 in args.dimensions else args.dimensions[0]
         text = profile_step(dimensions, max(args.sizes), args.seed, args.profile_solver, args.tolerance, cache,
                             out / "data" / "performance-profile.prof")
-        (out / "data" / "performance-profile.txt").write_text(text)
+        write_text(out / "data" / "performance-profile.txt", text)
     print(table)
+    print(describe_written(out / name for name in outputs))
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_standalone("qpcontact bench", add_arguments, run_command, argv)
 
 
 if __name__ == "__main__":

@@ -9,7 +9,9 @@ Records per step: cells, contacts in the system, unknowns, wall time of the step
 time (setup + solve), and the largest and mean overlap (fraction of the diameter) of the state
 the step starts from; and the overlaps of the final state. Medians over the steps.
 
-    flock /tmp/qpcontact-bench.lock python -m qpcontact.studies.colony_10k colony_2d:10000 SNAPSHOT.npz
+    flock /tmp/qpcontact-bench.lock python -m qpcontact.studies.colony_10k colony_2d:10000 SNAPSHOT.npz --out DIR
+
+writes ``DIR/colony_10k.md`` (default ``./colony_10k-out``).
 """
 
 from __future__ import annotations
@@ -22,21 +24,39 @@ from pathlib import Path
 
 import numpy as np
 
+from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
 from ..colony import Colony, Settings, divide, expansion_time_step, grow, load_colony, overlap_fractions
 from ..geometry import find_contacts
+from ..outputs import describe_written, prepare_folder, write_text
 from .scenes import colony_2d
 
 CONFIGS = ["osqp@1e-3", "osqp@1e-4", "clarabel@1e-6", "mprgp@1e-6"]
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m qpcontact.studies.colony_10k",
-                                     description=(__doc__ or "").split("\n\n")[0])
+def solver_at_tolerance(text: str) -> tuple[str, float]:
+    """``solver@tolerance``, e.g. ``osqp@1e-3``."""
+    solver, at, tolerance = text.partition("@")
+    if not (solver and at):
+        raise argparse.ArgumentTypeError(f"expected solver@tolerance, got {text!r}")
+    return solver, positive_float(tolerance)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("starts", nargs="+", help="snapshot .npz, folder of snapshots, or colony_2d:N")
-    parser.add_argument("--steps", type=int, default=5)
-    parser.add_argument("--solvers", nargs="+", default=CONFIGS, help="solver@tolerance, each run from the same start")
-    parser.add_argument("--out", type=Path, default=Path("docs/data/colony_10k.md"), help="the table (Markdown)")
-    args = parser.parse_args(argv)
+    parser.add_argument("--steps", type=positive_int, default=5, help="growth steps from each start (default: 5)")
+    parser.add_argument("--solvers", type=comma_list(solver_at_tolerance), default=list(map(solver_at_tolerance, CONFIGS)),
+                        metavar="LIST", help=f"comma-separated solver@tolerance [dimensionless], each run from the same "
+                                             f"start (default: {','.join(CONFIGS)})")
+    add_output_arguments(parser, "colony_10k", "the table colony_10k.md")
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_standalone("python -m qpcontact.studies.colony_10k", add_arguments, run_command, argv,
+                          (__doc__ or "").split("\n\n")[0])
+
+
+def run_command(args: argparse.Namespace) -> int:
+    prepare_folder(args.out, ("colony_10k.md",), overwrite=args.overwrite)
     s = Settings()
     lines = [
         f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {platform.machine()} (2 cores shared with "
@@ -47,10 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     ]
     for spec in args.starts:
         start, label = load_start(spec, s)
-        lines += measure(start, label, s, args.steps, [(c.split("@")[0], float(c.split("@")[1])) for c in args.solvers])
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text("\n".join(lines) + "\n")
+        lines += measure(start, label, s, args.steps, args.solvers)
+    written = write_text(args.out / "colony_10k.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
+    print(describe_written([written]))
     return 0
 
 

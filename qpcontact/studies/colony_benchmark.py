@@ -7,10 +7,10 @@ over the run, the 99th percentile of the per-step largest, and the run's mean (t
 each step's mean overlap over the overlapping contacts), all as fractions of the diameter.
 
 Writes ``OUT/data/colony_benchmark.csv``, ``OUT/data/colony_benchmark.md`` (table) and
-``OUT/img/colony_error_time.png`` (``--out-dir OUT``, default ``docs``). Run it from the
-repository root under ``flock /tmp/qpcontact-bench.lock``:
+``OUT/img/colony_error_time.png`` (``--out OUT``, default ``./colony_benchmark-out``; ``--out
+docs --overwrite`` updates the project's docs). Run it under ``flock /tmp/qpcontact-bench.lock``:
 
-    flock /tmp/qpcontact-bench.lock python -m qpcontact.studies.colony_benchmark
+    flock /tmp/qpcontact-bench.lock python -m qpcontact.studies.colony_benchmark --out docs --overwrite
 """
 
 from __future__ import annotations
@@ -27,7 +27,9 @@ from typing import Any
 
 import numpy as np
 
+from ..arguments import add_output_arguments, comma_list, positive_int, run_standalone
 from ..colony import Settings, run_colony
+from ..outputs import atomic_write, describe_written, prepare_folder, write_text
 from ..solvers import available_solvers
 
 #: A configuration is not repeated further once its runs took this long (the table says how
@@ -45,8 +47,8 @@ CONFIGS: list[tuple[str, dict[str, Any]]] = [
     ("clarabel 1e-8", dict(solver="clarabel", tolerance=1e-8)),
     ("piqp 1e-4", dict(solver="piqp", tolerance=1e-4)),
     ("piqp 1e-6", dict(solver="piqp", tolerance=1e-6)),
-    ("clarabel 1e-6, no position correction", dict(solver="clarabel", tolerance=1e-6, position_correction=0.0)),
-    ("clarabel 1e-6, half step (cfl 0.15)", dict(solver="clarabel", tolerance=1e-6, cfl=0.15)),
+    ("clarabel 1e-6 without position correction", dict(solver="clarabel", tolerance=1e-6, position_correction=0.0)),
+    ("clarabel 1e-6 half step (cfl 0.15)", dict(solver="clarabel", tolerance=1e-6, cfl=0.15)),
 ]
 
 
@@ -57,6 +59,8 @@ def measure(label: str, changes: dict[str, Any], cells: int, repeats: int) -> di
     run = None
     for _ in range(max(1, repeats)):
         run = run_colony(dataclasses.replace(Settings(n_cells=cells), **changes), progress=False)
+        if run.interrupted:  # Ctrl-C: run_colony stopped cleanly; the benchmark stops too
+            raise KeyboardInterrupt
         walls.append(run.wall_seconds)
         solves.append(float(np.sum(run.history["solve_seconds"])))
         if run.error or sum(walls) > BUDGET_SECONDS:
@@ -80,15 +84,27 @@ def measure(label: str, changes: dict[str, Any], cells: int, repeats: int) -> di
     }
 
 
+#: The files written, relative to ``--out``.
+OUTPUTS = ("data/colony_benchmark.csv", "data/colony_benchmark.md", "img/colony_error_time.png")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--cells", type=positive_int, default=500, help="grow each colony to this many cells (default: 500)")
+    parser.add_argument("--repeats", type=positive_int, default=3, help="whole runs per configuration, median time "
+                        "kept (default: 3)")
+    parser.add_argument("--configs", type=comma_list(choices=[label for label, _ in CONFIGS]), metavar="LIST",
+                        help=f"comma-separated configurations (default: all: {', '.join(label for label, _ in CONFIGS)})")
+    add_output_arguments(parser, "colony_benchmark", "data/colony_benchmark.csv, data/colony_benchmark.md and "
+                         "img/colony_error_time.png")
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m qpcontact.studies.colony_benchmark",
-                                     description=(__doc__ or "").split("\n\n")[0])
-    parser.add_argument("--cells", type=int, default=500)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--configs", nargs="+", metavar="LABEL", help="only these configurations (default: all)")
-    parser.add_argument("--out-dir", type=Path, default=Path("docs"),
-                        help="writes data/colony_benchmark.csv, data/colony_benchmark.md, img/colony_error_time.png")
-    args = parser.parse_args(argv)
+    return run_standalone("python -m qpcontact.studies.colony_benchmark", add_arguments, run_command, argv,
+                          (__doc__ or "").split("\n\n")[0])
+
+
+def run_command(args: argparse.Namespace) -> int:
+    prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
     installed = available_solvers()
     rows = []
     for label, changes in CONFIGS:
@@ -107,12 +123,12 @@ def main(argv: list[str] | None = None) -> int:
     if not rows:
         print("no configuration ran")
         return 1
-    data = args.out_dir / "data"
-    data.mkdir(parents=True, exist_ok=True)
-    with open(data / "colony_benchmark.csv", "w", newline="") as handle:
+    def write_rows(handle: Any) -> None:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
+
+    atomic_write(args.out / "data" / "colony_benchmark.csv", write_rows, text=True)
     stamp = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     lines = [
         f"Measured {stamp} on {platform.machine()} (2 cores; load average {os.getloadavg()[0]:.1f} at the end of the run), Python {platform.python_version()}; "
@@ -128,8 +144,9 @@ def main(argv: list[str] | None = None) -> int:
         note = f"FAILED: {r['error']}" if r["error"] else ""
         lines.append(f"| {r['config']} | {r['steps']} | {r['repeats']} | {r['wall_s']:.1f} | {r['solve_s']:.1f} | {r['ms_per_step']:.1f} | "
                      f"{r['max_overlap']:.4f} | {r['p99_overlap']:.4f} | {r['mean_overlap']:.5f} | {note} |")
-    (data / "colony_benchmark.md").write_text("\n".join(lines) + "\n")
-    plot(rows, args.out_dir / "img" / "colony_error_time.png", args.cells)
+    write_text(args.out / "data" / "colony_benchmark.md", "\n".join(lines) + "\n")
+    plot(rows, args.out / "img" / "colony_error_time.png", args.cells)
+    print(describe_written(args.out / name for name in OUTPUTS))
     return 0
 
 

@@ -38,6 +38,7 @@ import csv
 import math
 import multiprocessing
 import platform
+import sys
 import time
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -47,8 +48,11 @@ from typing import Any
 import numpy as np
 import qpsolvers
 
+from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
 from ..assembly import ContactSystem, build_system
+from ..errors import InvalidArgumentError, UnknownSolverError
 from ..geometry import colliding, find_contacts
+from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import metrics, solve_system
 from ..solvers import QP_FORMS, available_solvers, get_solver
 from . import harness
@@ -130,8 +134,8 @@ def all_methods(solvers: list[str] | None = None) -> list[Method]:
     out = []
     for name in names:
         if name not in available_solvers(include_baselines=True):
-            raise SystemExit(f"qpcontact compare: unknown or uninstalled solver {name!r}; "
-                             f"known: {', '.join(available_solvers(include_baselines=True))}")
+            raise UnknownSolverError(f"unknown or uninstalled solver {name!r}; "
+                                     f"known: {', '.join(available_solvers(include_baselines=True))}")
         spec = get_solver(name)
         forms = spec.forms[:1] if spec.plain else spec.forms
         out += [Method(name, f, form) for f in spec.formulations for form in forms]
@@ -477,16 +481,15 @@ def plot_scenes(cases: list[SceneCase], path: Path, max_cells: int = 1000) -> No
 # ------------------------------------------------------------------------------------------
 # Command
 # ------------------------------------------------------------------------------------------
-def _select_scenes(spec: str | None, quick: bool) -> list[SceneCase]:
-    if not spec:
+def _select_scenes(names: list[str] | None, quick: bool) -> list[SceneCase]:
+    if not names:
         return QUICK_SCENES if quick else DEFAULT_SCENES
     out = []
-    for name in spec.split(","):
-        name = name.strip()
+    for name in names:
         matches = [c for c in ALL_SCENES.values() if name in (c.name, c.family, c.generator)]
         if not matches:
-            raise SystemExit(f"qpcontact compare: unknown scene {name!r}; known: {', '.join(ALL_SCENES)} "
-                             "(or a family: hand-made, colony_2d, colony_3d)")
+            raise InvalidArgumentError(f"unknown scene {name!r}; known: {', '.join(ALL_SCENES)} "
+                                       "(or a family: hand-made, colony_2d, colony_3d)")
         out += [m for m in matches if m not in out]
     return out
 
@@ -518,68 +521,98 @@ def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
     harness.write_csv(rows, path, COLUMNS, digits=6)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="qpcontact compare", description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", help="comma-separated scene names or families (default: the default set; "
-                        f"known: {', '.join(ALL_SCENES)})")
-    parser.add_argument("--solvers", help="comma-separated solvers (default: every installed one, baselines included: "
-                        f"{', '.join(available_solvers(include_baselines=True))})")
-    parser.add_argument("--tolerances", default=None, help="comma-separated tolerances (default 1e-3,1e-6,1e-9)")
-    parser.add_argument("--repeats", type=int, default=3, help="repeats per run; the median time is kept (default 3)")
-    parser.add_argument("--time-limit", type=float, default=5.0,
-                        help="seconds per solve, passed to the backends that take one; a run is killed after "
-                             "1.5× this plus a few seconds (default 5)")
-    parser.add_argument("--out", type=Path, default=Path("compare-out"), help="output folder (default ./compare-out)")
-    parser.add_argument("--quick", action="store_true", help="a small set (five small scenes, tolerances 1e-3, 1e-6, one repeat)")
+#: The files ``qpcontact compare`` writes in its folder.
+OUTPUTS = ("solvers.csv", "solvers.png", "solvers_scenes.png", "solvers.md")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``qpcontact compare``."""
+    parser.description = ("Solver comparison: every solver's error against its run time on colony snapshots and "
+                          "hand-made scenes. Writes solvers.csv (every run), solvers.png (error against time), "
+                          "solvers_scenes.png and solvers.md (summary tables) into --out. Ctrl-C stops and writes "
+                          "what was done.")
+    parser.add_argument("--scenes", type=comma_list(), metavar="LIST",
+                        help=f"comma-separated scene names or families (default: the default set; known: "
+                             f"{', '.join(ALL_SCENES)}; families: hand-made, colony_2d, colony_3d)")
+    parser.add_argument("--solvers", type=comma_list(), metavar="LIST",
+                        help="comma-separated solvers (default: every installed one, baselines included: "
+                             f"{', '.join(available_solvers(include_baselines=True))})")
+    parser.add_argument("--tolerances", type=comma_list(positive_float), metavar="LIST",
+                        help="comma-separated solver tolerances [dimensionless, scaled units] (default: 1e-3,1e-6,1e-9; "
+                             "--quick: 1e-3,1e-6)")
+    parser.add_argument("--repeats", type=positive_int, default=None,
+                        help="repeats per run; the median time is kept (default: 3; --quick: 1)")
+    parser.add_argument("--time-limit", type=positive_float, default=5.0,
+                        help="time limit per solve [s], passed to the backends that take one; a run is killed after "
+                             "1.5× this plus a few seconds (default: 5)")
+    add_output_arguments(parser, "compare", "the CSV, plots and tables")
+    parser.add_argument("--quick", action="store_true", help="a small set: five small scenes, tolerances 1e-3 and 1e-6, "
+                        "one repeat (about a minute)")
     parser.add_argument("--replot", type=Path, metavar="CSV",
                         help="only redraw solvers.png in --out from a CSV of an earlier run (no solving)")
-    args = parser.parse_args(argv)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``qpcontact compare``."""
     if args.replot:
-        args.out.mkdir(parents=True, exist_ok=True)
+        if not args.replot.is_file():
+            raise InvalidArgumentError(f"{args.replot}: no such file")
+        prepare_folder(args.out, ("solvers.png",), overwrite=args.overwrite)
         plot(read_csv(args.replot), args.out / "solvers.png")
-        print(f"wrote {args.out / 'solvers.png'}")
+        print(describe_written([args.out / "solvers.png"]))
         return 0
+    cases = _select_scenes(args.scenes, args.quick)
+    methods = all_methods(args.solvers)
+    prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
     from tqdm import tqdm
 
-    tolerances = [float(t) for t in args.tolerances.split(",")] if args.tolerances else (
-        [1e-3, 1e-6] if args.quick else list(DEFAULT_TOLERANCES))
-    repeats = 1 if args.quick and args.repeats == 3 else max(1, args.repeats)
-    cases = _select_scenes(args.scenes, args.quick)
-    methods = all_methods([s.strip() for s in args.solvers.split(",")] if args.solvers else None)
-    args.out.mkdir(parents=True, exist_ok=True)
+    tolerances = args.tolerances or ([1e-3, 1e-6] if args.quick else list(DEFAULT_TOLERANCES))
+    repeats = args.repeats or (1 if args.quick else 3)
     started = datetime.now(UTC)
     rows: list[dict[str, Any]] = []
     scene_lines = []
+    done: list[SceneCase] = []
+    interrupted = False
     warm = warm_up_system()
-    with tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True) as bar:
-        for case in cases:
-            bar.set_description(f"{case.name}: references")
-            prepared = prepare(case)
-            assert prepared.system is not None, f"{case.name}: nothing collides"
-            k, n = prepared.system.shape
-            scene_lines.append(f"| {case.name} | {prepared.cells.n} | {k} | {n} | {'yes' if prepared.system.planar else 'no'} "
-                               f"| {'yes' if prepared.all_active else 'no'} | {prepared.reference_residual:.1e} "
-                               f"| {1e3 * prepared.assemble_seconds:.3g} | {1e3 * prepared.reference_seconds:.3g} |")
-            for method in methods:
-                dense_only = get_solver(method.solver).dense
-                for tolerance in tolerances:
-                    bar.set_description(f"{case.name}: {method.label} {tolerance:g}")
-                    if dense_only and n > DENSE_MAX_UNKNOWNS:
+    try:
+        with tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True) as bar:
+            for case in cases:
+                bar.set_description(f"{case.name}: references")
+                prepared = prepare(case)
+                assert prepared.system is not None, f"{case.name}: nothing collides"
+                done.append(case)
+                k, n = prepared.system.shape
+                scene_lines.append(f"| {case.name} | {prepared.cells.n} | {k} | {n} | {'yes' if prepared.system.planar else 'no'} "
+                                   f"| {'yes' if prepared.all_active else 'no'} | {prepared.reference_residual:.1e} "
+                                   f"| {1e3 * prepared.assemble_seconds:.3g} | {1e3 * prepared.reference_seconds:.3g} |")
+                for method in methods:
+                    dense_only = get_solver(method.solver).dense
+                    for tolerance in tolerances:
+                        bar.set_description(f"{case.name}: {method.label} {tolerance:g}")
+                        if dense_only and n > DENSE_MAX_UNKNOWNS:
+                            bar.update()
+                            continue  # dense-only backends are not run on large scenes (stated in the report)
+                        rows.append(run_one(prepared, method, tolerance, time_limit=args.time_limit, repeats=repeats,
+                                            warm=warm))
                         bar.update()
-                        continue  # dense-only backends are not run on large scenes (stated in the report)
-                    rows.append(run_one(prepared, method, tolerance, time_limit=args.time_limit, repeats=repeats,
-                                        warm=warm))
-                    bar.update()
+    except KeyboardInterrupt:
+        interrupted = True
     finished = datetime.now(UTC)
+    if not rows:
+        print("qpcontact compare: interrupted before any run finished; nothing written", file=sys.stderr)
+        return 130
     write_csv(rows, args.out / "solvers.csv")
     plot(rows, args.out / "solvers.png")
-    plot_scenes(cases, args.out / "solvers_scenes.png")
+    plot_scenes(done, args.out / "solvers_scenes.png")
     summary = summarize(rows, args.time_limit)
-    largest = max(cases, key=lambda c: next((r["unknowns"] for r in rows if r["scene"] == c.name), 0)).name
+    ran = [c for c in done if any(r["scene"] == c.name for r in rows)]
+    largest = max(ran, key=lambda c: next((r["unknowns"] for r in rows if r["scene"] == c.name), 0)).name
     mid_tol = sorted(tolerances)[len(tolerances) // 2]
     text = "\n".join([
         f"# Solver comparison ({started:%Y-%m-%d %H:%M} to {finished:%H:%M} UTC)",
         "",
+        *([f"**Interrupted (Ctrl-C) after {len(rows)} runs: the tables hold the runs that were done.**", ""]
+          if interrupted else []),
         f"Machine: {platform.machine()}, {multiprocessing.cpu_count()} cores, Python {platform.python_version()}, "
         f"qpsolvers {qpsolvers.__version__}. Times are medians of up to {repeats} repeats (fewer once a run's repeats "
         f"took {REPEAT_BUDGET:g} s), time limit {args.time_limit:g} s per solve. Tolerances: "
@@ -613,8 +646,11 @@ def main(argv: list[str] | None = None) -> int:
         scene_table(rows, largest, mid_tol),
         "",
     ])
-    (args.out / "solvers.md").write_text(text)
+    write_text(args.out / "solvers.md", text)
     print(text)
-    print(f"wrote {args.out / 'solvers.csv'}, {args.out / 'solvers.png'}, {args.out / 'solvers_scenes.png'}, "
-          f"{args.out / 'solvers.md'}")
-    return 0
+    print(describe_written(args.out / name for name in OUTPUTS))
+    return 130 if interrupted else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_standalone("qpcontact compare", add_arguments, run_command, argv)

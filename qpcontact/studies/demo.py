@@ -12,9 +12,11 @@ import argparse
 import time
 from pathlib import Path
 
+from ..arguments import non_negative_int, positive_float, positive_int, run_standalone
 from ..assembly import build_system
 from ..errors import QPContactError
 from ..geometry import colliding, find_contacts
+from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import metrics, reference_solution, resolve
 from ..solvers import FORMULATIONS, available_solvers, get_solver
 from .scenes import colony_2d, colony_3d
@@ -56,22 +58,35 @@ def markdown(rows: list[tuple[str, ...]]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="qpcontact demo", description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--cells", type=int, default=500, help="number of cells (default 500)")
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``qpcontact demo``."""
+    parser.description = ("Resolve one colony scene with every installed solver and print a table: time and error "
+                          "against a high-accuracy reference. Writes a file only with --out.")
+    parser.add_argument("--cells", type=positive_int, default=500, help="number of cells (default: 500)")
     parser.add_argument("--dimensions", type=int, choices=(2, 3), default=2,
-                        help="2D monolayer or 3D biofilm (default 2)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--tolerance", type=float, default=1e-6, help="solver tolerance (default 1e-6)")
-    parser.add_argument("--out", type=Path, default=None, help="also write the table (Markdown) to this file")
-    args = parser.parse_args(argv)
+                        help="2: a monolayer; 3: a biofilm (default: 2)")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed of the scene (default: 0)")
+    parser.add_argument("--tolerance", type=positive_float, default=1e-6,
+                        help="solver tolerance [dimensionless, scaled units] (default: 1e-6)")
+    parser.add_argument("--out", type=Path, default=None, metavar="FOLDER",
+                        help="also write the table (Markdown) to FOLDER/demo.md (default: print only)")
+    parser.add_argument("--overwrite", action="store_true", help="replace FOLDER/demo.md of an earlier run")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``qpcontact demo``: exit status 1 when a bundled solver fails."""
+    if args.out is not None:
+        prepare_folder(args.out, ("demo.md",), overwrite=args.overwrite)
     scene, rows = run(args.cells, args.seed, args.dimensions, args.tolerance)
     text = (f"{scene}\n\n{markdown(rows)}\n\npenetration: worst remaining approach / largest approach speed; "
             "distance: ‖x − x*‖_W/‖x*‖_W to a high-accuracy reference of the same formulation; momentum: |ΣΔp|/Σ|λ|; "
-            "ΔKE/KE_imp: kinetic energy change over the impulse energy (≤ 0 for inelastic contact).")
+            "ΔKE/KE_imp: kinetic energy change over the impulse energy (≤ 0 for inelastic contact); times in ms.")
     print(text)
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text + "\n")
+    if args.out is not None:
+        print(describe_written([write_text(args.out / "demo.md", text + "\n")]))
     failed = [row for row in rows if row[3] != "yes" and get_solver(row[0]).bundled]
     return 1 if failed else 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_standalone("qpcontact demo", add_arguments, run_command, argv)

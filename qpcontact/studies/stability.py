@@ -1,13 +1,17 @@
 """The stability report: every installed solver × formulation on the catalogue of stiff and
 extreme cases (:mod:`qpcontact.studies.catalogue`), with and without the internal scaling.
 
-``qpcontact stability [--cases PATTERN] [--time-limit S] [--out docs/data/stability]`` writes
-``<out>.csv`` (one row per case × solver × formulation × scaling, every measure) and
-``<out>.md`` (the case × solver matrix and the failures with their messages).
+``qpcontact stability [--cases PATTERNS] [--quick] [--out FOLDER]`` writes ``FOLDER/stability.csv``
+(one row per case × solver × formulation × form × scaling, every measure) and
+``FOLDER/stability.md`` (the case × solver matrix and the failures with their messages); the
+default folder is ``./stability-out`` (``--out docs/data --overwrite`` updates the committed
+report). Ctrl-C stops the report and writes the runs that were done.
 
 Each run is classified as one of
 
 - ``ok``: :func:`qpcontact.resolve` returned a converged result and every check below passed;
+- ``refused``: the solver does not take that formulation or form (e.g. MPRGP on least squares),
+  which it says before solving: not run, not a failure;
 - ``error``: resolve raised a documented :class:`~qpcontact.errors.QPContactError` (for a solver
   that did not deliver, :class:`~qpcontact.errors.SolverFailedError`); its message is kept;
 - ``wrong``: resolve returned a converged result that fails a check: silent garbage, a bug;
@@ -51,9 +55,19 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import QPContactError
+from ..arguments import (
+    add_output_arguments,
+    comma_list,
+    non_negative_int,
+    on_off,
+    positive_float,
+    positive_int,
+    run_standalone,
+)
+from ..errors import InvalidArgumentError, QPContactError
+from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import metrics, resolve
-from ..solvers import DEFAULT_FORM, FORMULATIONS, QP_FORMULATIONS, available_solvers, get_solver
+from ..solvers import DEFAULT_FORM, QP_FORMS, QP_FORMULATIONS, available_solvers, get_solver
 from . import harness
 from .catalogue import CATALOGUE
 from .harness import Prepared
@@ -74,7 +88,10 @@ DISTANCE_LIMIT = float(np.sqrt(2 * KKT_LIMIT))
 #: Runs faster than this [s] are repeated (``--repeats``) and timed by their median.
 REPEAT_BELOW = 1.0
 #: Outcomes, best first.
-OUTCOMES = ("ok", "error", "wrong", "crash", "timeout")
+OUTCOMES = ("ok", "refused", "error", "wrong", "crash", "timeout")
+#: Cases of ``--quick``: the hardest of most families, none of the large ones.
+QUICK_CASES = ("mass_ratio_1e-08", "aspect_10000", "growth_inertia_1e+08", "parallel_1e-12", "crossing", "overlap_mixed",
+               "velocity_mixed", "units_um_pg_s", "jammed_disks", "duplicate_contacts")
 
 
 def prepare(case: Scene, seed: int = 0, size: dict[str, Any] | None = None) -> Prepared:
@@ -142,6 +159,9 @@ def run_one(prep: Prepared, solver: str, formulation: str, form: str, scale: boo
     times are the medians."""
     row: dict[str, Any] = {"case": prep.case.name, "family": prep.case.family, "solver": solver,
                            "formulation": formulation, "form": form, "scale": scale}
+    refused = refusal(solver, formulation, form)
+    if refused:
+        return {**row, "outcome": "refused", "seconds": 0.0, "message": refused}
     kwargs: dict[str, Any] = {"formulation": formulation, "form": form, **prep.case.options}
     t0 = time.perf_counter()
     try:
@@ -171,10 +191,23 @@ def run_one(prep: Prepared, solver: str, formulation: str, form: str, scale: boo
     return row
 
 
+def refusal(solver: str, formulation: str, form: str) -> str:
+    """Why the solver does not take this formulation and form ("" if it does)."""
+    try:
+        get_solver(solver).plan(formulation, form)
+    except InvalidArgumentError as exc:
+        return str(exc)
+    return ""
+
+
 def guarded(prep: Prepared, solver: str, formulation: str, form: str, scale: bool, time_limit: float,
             guard: float, repeats: int = 1) -> dict[str, Any]:
     """:func:`run_one` in a child process (:func:`qpcontact.studies.harness.guarded`), killed
-    after ``guard`` seconds (outcome ``timeout``)."""
+    after ``guard`` seconds (outcome ``timeout``); a refused combination is not run at all."""
+    refused = refusal(solver, formulation, form)
+    if refused:
+        return {"case": prep.case.name, "family": prep.case.family, "solver": solver, "formulation": formulation,
+                "form": form, "scale": scale, "outcome": "refused", "seconds": 0.0, "message": refused}
     t0 = time.perf_counter()
     status, payload = harness.guarded(run_one, (prep, solver, formulation, form, scale, time_limit, repeats), guard,
                                       preload=("qpcontact.studies.stability",))
@@ -216,7 +249,7 @@ def _cell(row: dict[str, Any]) -> str:
         return f"ok {row['seconds'] * 1e3:.3g}ms"
     if outcome == "wrong":
         return "**WRONG** " + row["message"].removeprefix("converged, but fails: ")
-    return {"error": "error", "crash": "**CRASH**", "timeout": "**TIMEOUT**"}[outcome]
+    return {"refused": "refused", "error": "error", "crash": "**CRASH**", "timeout": "**TIMEOUT**"}[outcome]
 
 
 def matrix_markdown(rows: list[dict[str, Any]], preps: dict[str, Prepared], scale: bool) -> str:
@@ -238,9 +271,9 @@ def summary_markdown(rows: list[dict[str, Any]]) -> str:
     """Per solver column and scaling: counts of each outcome, median time and distance of the
     correct answers."""
     columns = list(dict.fromkeys(_column(r) for r in rows))
-    lines = ["| solver | scaled: ok / error / wrong / crash / timeout | median ms | median distance "
-             "| unscaled: ok / error / wrong / crash / timeout | median ms | median distance |",
-             "|---|---|---|---|---|---|---|"]
+    kinds = " / ".join(OUTCOMES)
+    lines = [f"| solver | scaled: {kinds} | median ms | median distance | unscaled: {kinds} | median ms "
+             "| median distance |", "|---|---|---|---|---|---|---|"]
     for col in columns:
         parts = [col]
         for scale in (True, False):
@@ -255,10 +288,10 @@ def summary_markdown(rows: list[dict[str, Any]]) -> str:
 
 
 def failures_markdown(rows: list[dict[str, Any]]) -> str:
-    """Every run that is not ``ok``, with its message (one line)."""
+    """Every run that is neither ``ok`` nor ``refused``, with its message (one line)."""
     lines = ["| case | solver | scaled | outcome | message |", "|---|---|---|---|---|"]
     for r in rows:
-        if r["outcome"] != "ok":
+        if r["outcome"] not in ("ok", "refused"):
             message = " ".join(str(r.get("message", "")).split())[:220].replace("|", "\\|")
             lines.append(f"| {r['case']} | {_column(r)} | {'yes' if r['scale'] else 'no'} | {r['outcome']} | {message} |")
     return "\n".join(lines)
@@ -277,12 +310,13 @@ def condition_markdown(preps: dict[str, Prepared]) -> str:
 
 
 def write_markdown(rows: list[dict[str, Any]], preps: dict[str, Prepared], path: Path, header: str) -> None:
+    """``stability.md``: the summary, the condition estimates, the matrices and the failures."""
     text = [header, "## Summary per solver\n", summary_markdown(rows), "\n## Condition estimates (single runs)\n",
             condition_markdown(preps), "\n## Scaled (default)\n", matrix_markdown(rows, preps, True)]
     if any(not r["scale"] for r in rows):
         text += ["\n## Unscaled (`scale=False`)\n", matrix_markdown(rows, preps, False)]
-    text += ["\n## Every run that is not ok\n", failures_markdown(rows), ""]
-    path.write_text("\n".join(text))
+    text += ["\n## Every run that is not ok (refused combinations left out)\n", failures_markdown(rows), ""]
+    write_text(path, "\n".join(text))
 
 
 #: Cases and ε values of the regularization study (``--regularization``).
@@ -312,61 +346,95 @@ def regularization_markdown(solvers: tuple[str, ...] = ("clarabel", "osqp"), see
 
 
 # ------------------------------------------------------------------------------------------
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="qpcontact stability", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", default="*", help="fnmatch pattern(s) of case names, comma separated")
-    parser.add_argument("--solvers", default=",".join(available_solvers()), help="comma-separated solver names")
-    parser.add_argument("--formulations", default=",".join(QP_FORMULATIONS),
-                        help=f"formulations of the QP solvers (plain solvers always run the plain problem); known: {FORMULATIONS}")
-    parser.add_argument("--forms", default="primal,contact", help="QP forms to run (primal, contact)")
-    parser.add_argument("--scaling", default="on,off", help="on, off or on,off")
-    parser.add_argument("--time-limit", type=float, default=20.0, help="solver time limit [s] (where supported)")
-    parser.add_argument("--guard", type=float, default=60.0, help="wall-clock limit of one run [s]")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--repeats", type=int, default=3, help=f"repeats of runs faster than {REPEAT_BELOW:g} s (median time)")
-    parser.add_argument("--out", default="docs/data/stability", help="output path without extension")
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``qpcontact stability``."""
+    parser.description = ("Run every installed solver × formulation on the catalogue of stiff and extreme cases, with "
+                          "and without the internal scaling, and classify each run: ok, refused (the solver does not "
+                          "take that formulation), error, wrong, crash, timeout. Writes stability.csv and stability.md "
+                          "into --out. Ctrl-C stops and writes what was done.")
+    parser.add_argument("--cases", type=comma_list(), default=["*"], metavar="PATTERNS",
+                        help="comma-separated case names or fnmatch patterns (default: all; --quick: "
+                             f"{len(QUICK_CASES)} cases); known: {', '.join(CATALOGUE)}")
+    parser.add_argument("--solvers", type=comma_list(), default=available_solvers(), metavar="LIST",
+                        help=f"comma-separated solver names (default: every installed one: {', '.join(available_solvers())})")
+    parser.add_argument("--formulations", type=comma_list(choices=QP_FORMULATIONS), default=list(QP_FORMULATIONS),
+                        metavar="LIST", help="comma-separated formulations of the QP solvers (plain solvers always run "
+                        f"the plain problem) (default: {','.join(QP_FORMULATIONS)})")
+    parser.add_argument("--forms", type=comma_list(choices=("auto", *QP_FORMS)), default=None, metavar="LIST",
+                        help="comma-separated QP forms (default: primal,contact; --quick: auto, each formulation's "
+                             "default)")
+    parser.add_argument("--scaling", type=comma_list(on_off), default=None, metavar="LIST",
+                        help="the internal scaling: on, off or on,off (default: on,off; --quick: on)")
+    parser.add_argument("--time-limit", type=positive_float, default=20.0,
+                        help="solver time limit [s], where the solver takes one (default: 20)")
+    parser.add_argument("--guard", type=positive_float, default=60.0,
+                        help="wall-clock limit of one run [s]; a run still going is killed (default: 60)")
+    parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed of the cases (default: 0)")
+    parser.add_argument("--repeats", type=positive_int, default=None,
+                        help=f"repeats of runs faster than {REPEAT_BELOW:g} s, median time kept (default: 3; --quick: 1)")
+    parser.add_argument("--quick", action="store_true", help=f"{len(QUICK_CASES)} cases, default forms, scaling on, "
+                        "one repeat (a minute or two)")
+    add_output_arguments(parser, "stability", "stability.csv and stability.md")
     parser.add_argument("--regularization", action="store_true",
-                        help="only the ε study: least_squares distance to the reference for several ε")
-    args = parser.parse_args(argv)
+                        help="only the ε study: least_squares distance to the reference for several ε "
+                             "(stability_regularization.md)")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``qpcontact stability``: exit status 1 if any run was wrong, crashed or timed out."""
+    outputs = ("stability_regularization.md",) if args.regularization else ("stability.csv", "stability.md")
+    names = [name for name in CATALOGUE if any(fnmatch.fnmatch(name, p) for p in args.cases)
+             and (not args.quick or args.cases != ["*"] or name in QUICK_CASES)]
+    if not names:
+        raise InvalidArgumentError(f"no case matches {','.join(args.cases)!r}; known: {', '.join(CATALOGUE)}")
+    forms = args.forms or (["auto"] if args.quick else ["primal", "contact"])
+    triples = runs(args.solvers, args.formulations, forms)  # an unknown or uninstalled solver: a named error
+    prepare_folder(args.out, outputs, overwrite=args.overwrite)
     if args.regularization:
-        out = Path(args.out + "_regularization.md")
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(f"# least_squares: distance to the reference against ε (seed {args.seed}, tolerance {TOLERANCE:g})\n\n"
-                       + regularization_markdown(seed=args.seed) + "\n")
-        print(f"wrote {out}")
+        out = write_text(args.out / outputs[0], f"# least_squares: distance to the reference against ε (seed {args.seed}, "
+                         f"tolerance {TOLERANCE:g})\n\n" + regularization_markdown(seed=args.seed) + "\n")
+        print(describe_written([out]))
         return 0
 
     from tqdm import tqdm
 
-    patterns = args.cases.split(",")
-    cases = [c for name, c in CATALOGUE.items() if any(fnmatch.fnmatch(name, p) for p in patterns)]
-    try:
-        triples = runs(args.solvers.split(","), args.formulations.split(","), args.forms.split(","))
-    except QPContactError as exc:  # an unknown or uninstalled solver name
-        print(f"qpcontact stability: {exc}", file=sys.stderr)
-        return 2
-    scalings = [s == "on" for s in args.scaling.split(",")]
+    cases = [CATALOGUE[name] for name in names]
+    scalings = args.scaling or ([True] if args.quick else [True, False])
+    repeats = args.repeats or (1 if args.quick else 3)
     preps: dict[str, Prepared] = {}
     rows: list[dict[str, Any]] = []
     started = datetime.now(UTC)
-    with tqdm(total=len(cases) * len(triples) * len(scalings), unit="run") as bar:
-        for case in cases:
-            bar.set_description(case.name)
-            prep = preps[case.name] = prepare(case, args.seed)
-            for scale in scalings:
-                for solver, formulation, form in triples:
-                    rows.append(guarded(prep, solver, formulation, form, scale, args.time_limit, args.guard, args.repeats))
-                    bar.update()
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    write_csv(rows, out.with_suffix(".csv"))
+    total = len(cases) * len(triples) * len(scalings)
+    try:
+        with tqdm(total=total, unit="run") as bar:
+            for case in cases:
+                bar.set_description(case.name)
+                prep = preps[case.name] = prepare(case, args.seed)
+                for scale in scalings:
+                    for solver, formulation, form in triples:
+                        rows.append(guarded(prep, solver, formulation, form, scale, args.time_limit, args.guard, repeats))
+                        bar.update()
+    except KeyboardInterrupt:
+        pass
+    interrupted = len(rows) < total
     header = (f"# Stability run\n\n{started:%Y-%m-%d %H:%M} UTC, {platform.node()} ({multiprocessing.cpu_count()} cores, "
               f"{platform.processor() or platform.machine()}), seed {args.seed}, tolerance {TOLERANCE:g}, time limit "
               f"{args.time_limit:g} s, guard {args.guard:g} s. Times (wall clock of one resolve call, detection to checks) are "
-              f"medians of {args.repeats} repeats for runs under {REPEAT_BELOW:g} s, single runs above.\n"
-              f"Command: `qpcontact stability {' '.join(argv or [])}`\n")
-    write_markdown(rows, preps, out.with_suffix(".md"), header)
+              f"medians of {repeats} repeats for runs under {REPEAT_BELOW:g} s, single runs above.\n"
+              + (f"\n**Interrupted (Ctrl-C) after {len(rows)} of {total} runs: the tables hold the runs that were done.**\n"
+                 if interrupted else ""))
+    if rows:
+        write_csv(rows, args.out / "stability.csv")
+        write_markdown(rows, {name: prep for name, prep in preps.items() if any(r["case"] == name for r in rows)},
+                       args.out / "stability.md", header)
     counts = {o: sum(r["outcome"] == o for r in rows) for o in OUTCOMES}
     print(f"{len(rows)} runs: " + ", ".join(f"{v} {k}" for k, v in counts.items()))
-    print(f"wrote {out.with_suffix('.csv')} and {out.with_suffix('.md')}")
+    print(describe_written([args.out / name for name in outputs] if rows else []))
+    if interrupted:
+        print(f"qpcontact stability: interrupted after {len(rows)} of {total} runs", file=sys.stderr)
+        return 130
     return 0 if counts["wrong"] == counts["crash"] == counts["timeout"] == 0 else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_standalone("qpcontact stability", add_arguments, run_command, argv)

@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 import qpcontact as q
 
@@ -29,3 +30,44 @@ def test_pictures_are_written(tmp_path):
     assert plots.animate(tmp_path / "colony.gif", [(0.0, cells.subset([0])), (1.0, cells)]).stat().st_size > 100
     outline = plots.capsule_outlines(cells.subset([0]))[0]
     assert np.allclose(outline.min(axis=0), [-1.5, -0.5], atol=0.05) and np.allclose(outline.max(axis=0), [1.5, 0.5], atol=0.05)
+
+
+def test_history_panels_do_not_plot_clipped_floors_as_data():
+    """Zeros (no overlap, no contact) were drawn at 1e-6 and 1e-16 as if measured."""
+    from qpcontact.colony import plots
+
+    history = {"time": [0.0, 1.0, 2.0], "cells": [1, 2, 2], "max_overlap": [0.0, 0.01, 0.0],
+               "mean_overlap": [0.0, 0.005, 0.0], "solve_seconds": [0.0, 0.02, 0.01],
+               "penetration": [0.0, 1e-9, 0.0], "complementarity": [np.nan, 1e-8, 0.0]}
+    figure = plots.history_figure(history)
+    lines = [line for ax in figure.axes for line in ax.get_lines()]
+    assert len(lines) == 6
+    for line in lines:
+        y = np.asarray(line.get_ydata(), dtype=float)
+        assert not np.any(np.isin(y, [1e-6, 1e-16])), line.get_label()
+        assert np.all(np.isnan(y) | (y > 0))
+    assert np.isnan(lines[1].get_ydata()[0]) and lines[1].get_ydata()[1] == 0.01
+    labels = [ax.get_xlabel() for ax in figure.axes[2:]] + [figure.axes[1].get_ylabel(), figure.axes[2].get_ylabel()]
+    assert labels == ["time [doubling times]"] * 2 + ["overlap [fraction of the diameter]", "contact solve per step [s]"]
+
+
+def test_a_3d_colony_is_drawn_from_above_and_from_the_side_with_walls_and_units(tmp_path, monkeypatch):
+    """3D colonies were seen from above only, walls were not drawn, axes had no units."""
+    from matplotlib.figure import Figure
+
+    from qpcontact.colony import plots
+
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
+    cells = q.Cells(centers=[[0, 0, 0.5], [3, 0, 0.5], [1.5, 0, 1.5]], axes=[[1, 0, 0], [1, 0, 0], [0.8, 0, 0.6]],
+                    lengths=2.0, radii=0.5)
+    plots.save_colony_picture(tmp_path / "c.png", cells, "biofilm", side_view=True,
+                              planes=[q.substrate(), *q.channel(4.0)])
+    top, side = saved[0].axes[:2]
+    assert (top.get_xlabel(), top.get_ylabel(), side.get_xlabel(), side.get_ylabel()) == (
+        "x [µm]", "y [µm]", "x [µm]", "z [µm]")
+    # From above: the two channel walls (the substrate is seen face-on); from the side: the substrate.
+    assert len(top.get_lines()) == 2 and len(side.get_lines()) == 1
+    z_outline = plots.capsule_outlines(cells, "side")[2][:, 1]
+    assert z_outline.max() == pytest.approx(1.5 + 0.6 + 0.5, abs=0.02)  # the tilted cell rises in the side view
+    assert side.get_ylim()[0] <= 0.0 <= side.get_ylim()[1]

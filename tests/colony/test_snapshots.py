@@ -1,42 +1,181 @@
-"""Colony snapshots and the NPZ cell arrays: what is written loads back equal."""
+"""Colony snapshots and the NPZ cell arrays: what is written loads back equal; what is
+corrupted or inconsistent is a named error; version 1 files still load."""
+
+import json
+import zipfile
 
 import numpy as np
 import pytest
 
 import qpcontact as q
 from qpcontact.colony import Colony
-from qpcontact.colony.snapshots import load_cells, load_colony, save_cells, save_colony
-from qpcontact.errors import InvalidArgumentError
+from qpcontact.colony.snapshots import (
+    VERSION,
+    cell_arrays,
+    load_cells,
+    load_colony,
+    load_snapshot,
+    save_cells,
+    save_colony,
+)
+from qpcontact.errors import InvalidArgumentError, InvalidSnapshotError
+
+CELL_NAMES = ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta",
+              "growth_momenta")
 
 
-def test_snapshot_loads_back_equal(tmp_path):
+def a_colony() -> Colony:
     cells = q.Cells(centers=[[0, 0, 0], [3, 0, 1]], axes=[[1, 0, 0], [0, 0.6, 0.8]], lengths=[1.0, 2.5],
                     radii=[0.5, 0.4], masses=[1.0, np.inf], growth_inertia=[10.0, np.inf],
                     momenta=[[1, 2, 3], [0, 0, 0]], angular_momenta=[[0.1, 0, 0], [0, 0, 0]], growth_momenta=[0.5, 0])
-    colony = Colony(cells, [7, 9], [3, -1], [0.7, 0.0], [0.1, 0.0], time=12.5, next_id=11)
-    path = save_colony(tmp_path / "sub" / "step_000001.npz", colony, step=42)
-    loaded, step = load_colony(path)
-    assert step == 42 and loaded.time == 12.5 and loaded.next_id == 11
-    for name in ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta",
-                 "growth_momenta"):
-        np.testing.assert_array_equal(getattr(loaded.cells, name), getattr(cells, name))
+    return Colony(cells, [7, 9], [3, -1], [0.7, 0.0], [0.1, 0.0], time=12.5, next_id=11)
+
+
+def assert_same_colony(loaded: Colony, colony: Colony) -> None:
+    for name in CELL_NAMES:
+        np.testing.assert_array_equal(getattr(loaded.cells, name), getattr(colony.cells, name))
     for name in ("ids", "parent_ids", "rates", "owed"):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(colony, name))
+    assert (loaded.time, loaded.next_id) == (colony.time, colony.next_id)
+
+
+def test_snapshot_loads_back_equal(tmp_path):
+    colony = a_colony()
+    path = save_colony(tmp_path / "sub" / "step_000001.npz", colony, step=42)
+    loaded, step = load_colony(path)
+    assert step == 42
+    assert_same_colony(loaded, colony)
     np.savez(tmp_path / "other.npz", centers=np.zeros((1, 3)))
     with pytest.raises(InvalidArgumentError, match="not a qpcontact-colony"):
         load_colony(tmp_path / "other.npz")
+
+
+def test_version_2_carries_settings_random_state_and_extra_arrays(tmp_path):
+    rng = np.random.default_rng(5)
+    rng.normal(size=3)
+    extra = {"warm_start.lambda": np.arange(4.0), "flags": np.array([True, False])}
+    path = save_colony(tmp_path / "s.npz", a_colony(), 3, settings={"solver": "clarabel", "tolerance": 1e-6}, rng=rng,
+                       extra=extra)
+    snapshot = load_snapshot(path)
+    assert snapshot.version == VERSION == 2 and snapshot.step == 3
+    assert snapshot.settings == {"solver": "clarabel", "tolerance": 1e-6}
+    assert snapshot.generator().normal(size=5).tolist() == rng.normal(size=5).tolist()  # the same random numbers
+    assert sorted(snapshot.extra) == sorted(extra)
+    for name, value in extra.items():
+        np.testing.assert_array_equal(snapshot.extra[name], value)
+    with pytest.raises(InvalidSnapshotError, match="extra array 'a b'"):
+        save_colony(tmp_path / "t.npz", a_colony(), extra={"a b": np.zeros(1)})
+
+
+def test_version_1_snapshots_written_by_other_tools_still_load(tmp_path):
+    """The documented version 1 format: no settings, no random state (a run from it is seeded)."""
+    colony = a_colony()
+    arrays = dict(cell_arrays(colony.cells), ids=colony.ids, parent_ids=colony.parent_ids, rates=colony.rates,
+                  owed=colony.owed)
+    np.savez_compressed(tmp_path / "v1.npz", format=np.array("qpcontact-colony"), version=np.array(1),
+                        time=np.array(12.5), step=np.array(7), next_id=np.array(11), **arrays)
+    snapshot = load_snapshot(tmp_path / "v1.npz")
+    assert (snapshot.version, snapshot.step, snapshot.settings, snapshot.rng_state, snapshot.extra) == (1, 7, None, None, {})
+    assert_same_colony(snapshot.colony, colony)
+
+
+def test_save_colony_returns_the_file_it_wrote(tmp_path):
+    """It wrote snap.npz and returned Path('snap')."""
+    path = save_colony(tmp_path / "snap", a_colony())
+    assert path == tmp_path / "snap.npz" and path.is_file()
+    assert load_colony(path)[0].cells.n == 2
+    assert save_cells(tmp_path / "cells", a_colony().cells) == tmp_path / "cells.npz"
+
+
+def test_a_snapshot_is_written_atomically(tmp_path, monkeypatch):
+    """A write that dies half way (SIGKILL, disk full) leaves the previous snapshot whole."""
+    path = save_colony(tmp_path / "step_000001.npz", a_colony(), 1)
+    before = path.read_bytes()
+
+    def dies(file, **arrays):
+        file.write(b"PK\x03\x04 half a zip")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(np, "savez_compressed", dies)
+    with pytest.raises(OSError, match="disk full"):
+        save_colony(path, a_colony(), 2)
+    assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == [path.name]
+
+
+def corrupt(path, how):
+    data = path.read_bytes()
+    if how == "truncated":
+        path.write_bytes(data[: len(data) // 2])
+    elif how == "one byte":
+        path.write_bytes(data[:1])
+    elif how == "empty":
+        path.write_bytes(b"")
+    elif how == "garbage":
+        path.write_bytes(b"\x00\x01 this is not a snapshot" * 10)
+    elif how == "bad member":  # a zip whose member is damaged: CRC or zlib error on reading
+        with zipfile.ZipFile(path) as zf:
+            info = zf.infolist()[-1]
+        start = info.header_offset + 30 + len(info.filename) + len(info.extra) + 5
+        path.write_bytes(data[:start] + bytes(b ^ 0xFF for b in data[start:start + 20]) + data[start + 20:])
+
+
+@pytest.mark.parametrize("how", ["truncated", "one byte", "empty", "garbage", "bad member"])
+def test_a_corrupted_snapshot_is_a_named_error(tmp_path, how):
+    """Raw EOFError, BadZipFile, zlib.error or "pickled data" came out before."""
+    path = save_colony(tmp_path / "s.npz", a_colony(), 1)
+    corrupt(path, how)
+    with pytest.raises(InvalidSnapshotError, match=rf"^{tmp_path / 's.npz'}: "):
+        load_colony(path)
+
+
+def test_a_missing_snapshot_is_a_named_error(tmp_path):
+    with pytest.raises(InvalidSnapshotError, match="no such file"):
+        load_colony(tmp_path / "nosuch.npz")
+    with pytest.raises(InvalidSnapshotError, match="no such file"):
+        load_cells(tmp_path / "nosuch.npz")
+
+
+def rewrite(path, **changes):
+    with np.load(path) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays.update(changes)
+    for name in [k for k, v in changes.items() if v is None]:
+        del arrays[name]
+    np.savez(path, **arrays)
+
+
+@pytest.mark.parametrize("changes, message", [
+    (dict(time=np.array(np.nan)), "time must be a finite number"),
+    (dict(step=np.array(2.7)), "step must be an integer"),
+    (dict(step=np.array(-5)), "step must be >= -1"),
+    (dict(ids=np.array([7.0, 9.0])), "ids must be integers"),
+    (dict(parent_ids=np.array([np.nan, -1.0])), "parent_ids must be integers"),
+    (dict(ids=np.array([7, 7])), "ids: must be unique"),
+    (dict(rates=np.array([0.7, np.nan])), "rates: must be finite"),
+    (dict(centers=np.array([[0, 0, np.nan], [3, 0, 1]])), "centers"),
+    (dict(lengths=np.array([1.0, 2.0, 3.0])), "lengths"),
+    (dict(version=np.array(3)), "snapshot version 3 .newer than this qpcontact"),
+    (dict(format=np.array("something-else")), "not a qpcontact-colony snapshot"),
+    (dict(owed=None), "misses owed"),
+    (dict(settings=np.array("[1, 2]")), "settings must be a JSON object"),
+    (dict(rng_state=np.array(json.dumps({"bit_generator": "Nonsense"}))), "rng_state names no NumPy bit generator"),
+    (dict(rng_state=np.array(json.dumps({"bit_generator": "PCG64", "state": {}}))), "not a valid PCG64 state"),
+])
+def test_an_inconsistent_snapshot_is_a_named_error(tmp_path, changes, message):
+    """NaN time, a float step, float ids and NaN parent ids loaded silently before."""
+    path = save_colony(tmp_path / "s.npz", a_colony(), 1, rng=np.random.default_rng(0))
+    rewrite(path, **changes)
+    with pytest.raises(InvalidSnapshotError, match=message):
+        load_colony(path)
 
 
 def test_cells_alone_load_back_equal_and_from_a_snapshot(tmp_path):
     cells = q.Cells(centers=[[0, 0, 0], [3, 0, 1]], axes=[[1, 0, 0], [0, 0.6, 0.8]], lengths=[1.0, 0.0],
                     radii=[0.5, 0.4], masses=[1.0, np.inf], growth_inertia=[10.0, np.inf], momenta=[[1, 2, 3], [0, 0, 0]])
     path = save_cells(tmp_path / "cache" / "cells.npz", cells)
-    assert sorted(np.load(path).files) == sorted(f for f in ("centers", "axes", "lengths", "radii", "masses",
-                                                          "growth_inertia", "momenta", "angular_momenta",
-                                                          "growth_momenta"))
+    assert sorted(np.load(path).files) == sorted(CELL_NAMES)
     for source in (path, save_colony(tmp_path / "snapshot.npz", Colony.founder(cells, 0.5))):
         loaded = load_cells(source)
-        for name in ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta",
-                     "growth_momenta"):
+        for name in CELL_NAMES:
             np.testing.assert_array_equal(getattr(loaded, name), getattr(cells, name))
-    assert not list((tmp_path / "cache").glob("*.tmp.npz"))  # written through a temporary file
+    assert [p.name for p in (tmp_path / "cache").iterdir()] == ["cells.npz"]  # written through a temporary file

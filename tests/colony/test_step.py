@@ -149,3 +149,20 @@ def test_contacts_that_do_not_collide_before_the_solve_must_still_be_in_the_syst
     assert all_near.min() > -1e-6  # nothing approaches any more
     with pytest.raises(InvalidArgumentError, match="keep_separating"):
         q.resolve(cells, solver="linear", contacts=contacts, keep_separating=True)
+
+
+def test_a_runs_step_options_clear_an_overlap_that_steps_defaults_leave():
+    """A new user's loop with step()'s defaults (no margin, no position correction) left an
+    overlap of 0.067 of a diameter standing for 50 steps; the difference to qpcontact simulate is
+    said in step's docstring, and Settings().step_options() steps as simulate does."""
+    from qpcontact.colony import Settings
+    from qpcontact.colony.step import largest_overlap
+
+    cells = q.Cells(centers=[[0, 0, 0], [0, 1.0 - 0.067, 0]], axes=[1, 0, 0], lengths=2.0, radii=0.5)
+    plain, run_like = cells, cells
+    for _ in range(50):
+        plain = step(plain, 0.02).cells
+        run_like = step(run_like, 0.02, **Settings().step_options()).cells
+    assert largest_overlap(plain) == pytest.approx(0.067)
+    assert largest_overlap(run_like) < 1e-9
+    assert "Settings().step_options()" in step.__doc__ and "no position correction" in step.__doc__

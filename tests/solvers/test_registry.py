@@ -149,3 +149,19 @@ def test_an_answer_is_checked_before_it_is_applied_whatever_solver_gave_it():
     finally:
         unregister("liar")
     assert "liar" not in registered_solvers()
+
+
+@pytest.mark.parametrize("backend", ["highs", "osqp"])
+def test_backends_print_nothing(backend):
+    """HiGHS printed its banner once per process: hundreds of times in the stability report,
+    whose every run is a child process."""
+    if backend not in qc.available_solvers():
+        pytest.skip(f"{backend} is not installed")
+    import subprocess
+    import sys
+
+    code = (f"import qpcontact as qc; from tests.helpers import random_scene; "
+            f"qc.resolve(random_scene(0, 20), solver={backend!r})")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                          cwd=Path(__file__).resolve().parents[2])
+    assert (done.stdout, done.stderr) == ("", "")

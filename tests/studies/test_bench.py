@@ -14,8 +14,12 @@ def test_quick_bench_writes_the_table_plot_and_data(tmp_path):
     out = tmp_path / "docs"
     (out).mkdir()
     (out / "performance.md").write_text("# Performance\n\nanalysis kept\n\n<!-- bench:start -->\nold\n<!-- bench:end -->\ntail kept\n")
-    code = bench.main(["--quick", "--out-dir", str(out), "--cache-dir", "none", "--repeats", "1",
-                       "--solvers", "linear", "linear/primal", "cg@1e-9", "mprgp@1e-7", "osqp/contact"])
+    args = ["--quick", "--out", str(out), "--cache-dir", "none", "--repeats", "1",
+            "--solvers", "linear,linear/primal,cg@1e-9,mprgp@1e-7,osqp/contact"]
+    # An existing performance.md is updated only when asked: the docs are not rewritten by accident.
+    assert bench.main(args) == 2
+    assert "\nold\n" in (out / "performance.md").read_text()
+    code = bench.main([*args, "--overwrite"])
     assert code == 0
     text = (out / "performance.md").read_text()
     assert "analysis kept" in text and "tail kept" in text and "\nold\n" not in text

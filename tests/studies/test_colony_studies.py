@@ -8,8 +8,8 @@ from qpcontact.studies import colony_10k, colony_benchmark
 
 
 def test_colony_benchmark_writes_its_table_data_and_picture(tmp_path):
-    code = colony_benchmark.main(["--cells", "6", "--repeats", "1", "--configs", "linear", "clarabel 1e-6",
-                                  "--out-dir", str(tmp_path)])
+    code = colony_benchmark.main(["--cells", "6", "--repeats", "1", "--configs", "linear,clarabel 1e-6",
+                                  "--out", str(tmp_path)])
     assert code == 0
     rows = list(csv.DictReader((tmp_path / "data" / "colony_benchmark.csv").open()))
     assert [r["config"] for r in rows] == ["linear", "clarabel 1e-6"]
@@ -19,9 +19,9 @@ def test_colony_benchmark_writes_its_table_data_and_picture(tmp_path):
 
 
 def test_colony_10k_steps_a_packed_colony_with_each_solver(tmp_path):
-    out = tmp_path / "table.md"
-    assert colony_10k.main(["colony_2d:40", "--steps", "2", "--solvers", "osqp@1e-4", "mprgp@1e-6",
-                            "--out", str(out)]) == 0
-    rows = [line for line in out.read_text().splitlines() if line.startswith("| scenes.colony_2d(40)")]
+    assert colony_10k.main(["colony_2d:40", "--steps", "2", "--solvers", "osqp@1e-4,mprgp@1e-6",
+                            "--out", str(tmp_path)]) == 0
+    rows = [line for line in (tmp_path / "colony_10k.md").read_text().splitlines()
+            if line.startswith("| scenes.colony_2d(40)")]
     assert [row.split("|")[2].strip() for row in rows] == ["osqp", "mprgp"]
     assert all(row.split("|")[-2].strip() == "" for row in rows)  # no failure noted

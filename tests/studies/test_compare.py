@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from qpcontact.studies import compare
+from tests.helpers import interrupt_on_call
 
 
 def read(path):
@@ -57,3 +58,15 @@ def test_shifted_geometric_mean():
     assert compare.shifted_geometric_mean(np.array([0.01, 0.01])) == pytest.approx(0.01)
     # exp(mean(log 0.01, log 0.04)) − 0.01 = 0.02 − 0.01
     assert compare.shifted_geometric_mean(np.array([0.0, 0.03])) == pytest.approx(0.01)
+
+
+def test_ctrl_c_writes_the_runs_that_were_done_and_earlier_results_are_kept(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "cmp"
+    args = ["--scenes", "two_rods", "--solvers", "linear,osqp", "--tolerances", "1e-3", "--repeats", "1", "--out", str(out)]
+    interrupt_on_call(monkeypatch, compare, "run_one", 3)
+    assert compare.main(args) == 130
+    assert len(read(out / "solvers.csv")) == 2
+    assert "Interrupted (Ctrl-C) after 2 runs" in (out / "solvers.md").read_text()
+    capsys.readouterr()
+    assert compare.main(args) == 2  # the earlier results are not overwritten by accident
+    assert "pass --overwrite" in capsys.readouterr().err and len(read(out / "solvers.csv")) == 2

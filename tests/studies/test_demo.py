@@ -7,9 +7,8 @@ from qpcontact import cli
 
 
 def test_demo_prints_a_row_per_solver_and_formulation(tmp_path, capsys):
-    out = tmp_path / "demo.md"
-    assert cli.main(["demo", "--cells", "60", "--out", str(out)]) == 0
-    text = out.read_text()
+    assert cli.main(["demo", "--cells", "60", "--out", str(tmp_path)]) == 0
+    text = (tmp_path / "demo.md").read_text()
     rows = [line for line in text.splitlines() if line.startswith("| ") and not line.startswith("| solver")]
     expected = [(solver, formulation) for solver in qc.available_solvers()
                 for formulation in qc.get_solver(solver).formulations]
@@ -17,10 +16,10 @@ def test_demo_prints_a_row_per_solver_and_formulation(tmp_path, capsys):
     bundled = [row for row in rows if qc.get_solver(row.split("|")[1].strip()).bundled]
     assert {row.split("|")[1].strip() for row in bundled} == {"linear", "mprgp", "ipm", "osqp", "clarabel"}
     assert all("| yes |" in row for row in bundled)
-    assert "colliding contacts" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "colliding contacts" in printed and f"wrote:\n  {tmp_path / 'demo.md'}" in printed
 
 
 def test_demo_in_3d(tmp_path):
-    out = tmp_path / "demo.md"
-    assert cli.main(["demo", "--cells", "40", "--dimensions", "3", "--out", str(out)]) == 0
-    assert out.read_text().startswith("3D colony, 40 cells")
+    assert cli.main(["demo", "--cells", "40", "--dimensions", "3", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "demo.md").read_text().startswith("3D colony, 40 cells")

@@ -13,6 +13,7 @@ import qpcontact as q
 from qpcontact.resolve import metrics
 from qpcontact.studies.catalogue import CATALOGUE, hub, long_chain
 from qpcontact.studies.stability import KKT_LIMIT, check, main, prepare
+from tests.helpers import interrupt_on_call
 
 #: Reduced sizes of the large cases.
 SMALL = {"hub_1000": {"n_neighbours": 60}, "chain_10000": {"n_cells": 200}}
@@ -153,11 +154,11 @@ def test_stability_command_writes_tables(tmp_path):
     out = tmp_path / "stab"
     code = main(["--cases", "parallel_0,crossing", "--solvers", "linear,osqp", "--formulations", "complementarity",
                  "--forms", "primal", "--time-limit", "5", "--guard", "60", "--out", str(out)])
-    rows = list(csv.DictReader(out.with_suffix(".csv").open()))
+    rows = list(csv.DictReader((out / "stability.csv").open()))
     assert code == 0 and len(rows) == 8
     assert {r["outcome"] for r in rows} == {"ok"}
-    assert "nan" not in out.with_suffix(".csv").read_text().lower()
-    assert "| parallel_0 |" in out.with_suffix(".md").read_text()
+    assert "nan" not in (out / "stability.csv").read_text().lower()
+    assert "| parallel_0 |" in (out / "stability.md").read_text()
 
 
 def test_condition_estimate_is_reported_and_none_when_singular():
@@ -180,3 +181,52 @@ def test_piqp_contact_form_solves_small_cases():
 def test_stability_command_names_an_unknown_solver(tmp_path, capsys):
     assert main(["--solvers", "nosuch", "--cases", "crossing", "--out", str(tmp_path / "stab")]) == 2
     assert "qpcontact stability: unknown solver 'nosuch'" in capsys.readouterr().err
+
+
+def test_a_refused_combination_is_counted_as_refused_not_as_an_error(tmp_path):
+    """MPRGP does not solve least squares, and says so before solving: that is no failure."""
+    out = tmp_path / "stab"
+    code = main(["--cases", "crossing", "--solvers", "mprgp", "--forms", "contact,primal", "--scaling", "on",
+                 "--repeats", "1", "--out", str(out)])
+    rows = list(csv.DictReader((out / "stability.csv").open()))
+    assert code == 0
+    outcomes = {(r["formulation"], r["form"]): r["outcome"] for r in rows}
+    assert outcomes == {("complementarity", "contact"): "ok", ("complementarity", "primal"): "refused",
+                        ("least_squares", "contact"): "refused", ("least_squares", "primal"): "refused"}
+    text = (out / "stability.md").read_text()
+    assert "ok / refused / error / wrong / crash / timeout" in text and "| mprgp LS | 0 / 1 / 0 / 0 / 0 / 0 |" in text
+
+
+def test_quick_mode_runs_a_few_cases_in_their_default_forms(tmp_path, capsys):
+    from qpcontact.studies.stability import QUICK_CASES
+
+    out = tmp_path / "stab"
+    assert main(["--quick", "--solvers", "linear,clarabel", "--out", str(out)]) == 0
+    rows = list(csv.DictReader((out / "stability.csv").open()))
+    assert sorted({r["case"] for r in rows}) == sorted(QUICK_CASES)
+    assert {(r["solver"], r["formulation"], r["form"], r["scale"]) for r in rows} == {
+        ("linear", "linear", "contact", "True"), ("clarabel", "complementarity", "contact", "True"),
+        ("clarabel", "least_squares", "primal", "True")}
+    assert f"wrote:\n  {out / 'stability.csv'}\n  {out / 'stability.md'}" in capsys.readouterr().out
+
+
+def test_ctrl_c_writes_the_runs_that_were_done(tmp_path, monkeypatch):
+    """A Ctrl-C lost the whole report."""
+    from qpcontact.studies import stability
+
+    interrupt_on_call(monkeypatch, stability, "guarded", 3)
+    out = tmp_path / "stab"
+    assert main(["--cases", "crossing,parallel_0", "--solvers", "linear,osqp", "--formulations", "complementarity",
+                 "--forms", "contact", "--scaling", "on", "--out", str(out)]) == 130
+    assert len(list(csv.DictReader((out / "stability.csv").open()))) == 2
+    assert "Interrupted (Ctrl-C) after 2 of 4 runs" in (out / "stability.md").read_text()
+
+
+def test_an_earlier_report_is_replaced_only_when_asked(tmp_path, capsys):
+    out = tmp_path / "stab"
+    out.mkdir()
+    (out / "stability.csv").write_text("committed\n")
+    args = ["--cases", "crossing", "--solvers", "linear", "--scaling", "on", "--out", str(out)]
+    assert main(args) == 2
+    assert "pass --overwrite" in capsys.readouterr().err and (out / "stability.csv").read_text() == "committed\n"
+    assert main([*args, "--overwrite"]) == 0 and "crossing" in (out / "stability.csv").read_text()

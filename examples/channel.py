@@ -1,0 +1,57 @@
+"""A colony growing between two walls (a microfluidic channel), in your own loop.
+
+One cell grows and divides in a channel 4 µm wide along x: ``qpcontact.grow`` (growth drive,
+contact solve with the cells and the two walls, move) and ``qpcontact.divide`` each step, with
+the options ``qpcontact simulate`` uses (``Settings().step_options()``) plus the walls
+(``qpcontact.channel``). The colony fills the channel and spreads along it. Writes a picture
+with the walls drawn.
+
+    python examples/channel.py [--cells 60] [--width 4] [--out channel-out]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+import qpcontact as qc
+from qpcontact.colony import Settings, simulate
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--cells", type=int, default=60, help="grow to this many cells (default: 60)")
+    parser.add_argument("--width", type=float, default=4.0, help="channel width [µm] (default: 4)")
+    parser.add_argument("--out", type=Path, default=Path("channel-out"), help="output folder (default: ./channel-out)")
+    args = parser.parse_args(argv)
+
+    settings = Settings()
+    walls = qc.channel(args.width)
+    options = {**settings.step_options(), "planes": walls}
+    colony = simulate.founder(settings)  # one cell at the origin, along x
+    rng = np.random.default_rng(settings.seed)
+    while colony.cells.n < args.cells:
+        dt = qc.expansion_time_step(colony, max_dt=settings.max_dt, cfl=settings.cfl)
+        colony, out = qc.grow(colony, dt, **options)
+        colony = qc.divide(colony, settings.division_length, rng, axis_noise=settings.axis_noise,
+                           rate_noise=settings.rate_noise, base_rate=settings.rate, planar=True)
+    cells = colony.cells
+    half = 0.5 * cells.lengths[:, None] * cells.axes
+    reach = np.abs(np.concatenate([cells.centers - half, cells.centers + half])[:, 1]) + np.tile(cells.radii, 2)
+    print(f"{cells.n} cells at t = {colony.time:.2f} doubling times; colony length {np.ptp(cells.centers[:, 0]):.1f} µm; "
+          f"outermost cell surface at |y| = {reach.max():.3f} µm (walls at {args.width / 2:g} µm)")
+
+    from qpcontact.colony import plots  # matplotlib: only when drawing
+
+    args.out.mkdir(parents=True, exist_ok=True)
+    picture = plots.save_colony_picture(args.out / "channel.png", cells, f"{cells.n} cells in a {args.width:g} µm channel",
+                                        planes=walls)
+    print(f"wrote {picture}")
+    return 0 if reach.max() <= args.width / 2 + 0.02 * 2 * settings.radius else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

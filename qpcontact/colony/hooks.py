@@ -1,0 +1,126 @@
+"""Model hooks: your own biology in a colony run, as CellModeller's model scripts do.
+
+A hook is a function ``hook(colony, step)`` that :func:`qpcontact.colony.run_colony` calls at
+the start of every step, before the time step is chosen, with the colony (a
+:class:`~qpcontact.Colony`: ``cells``, ``ids``, ``parent_ids``, ``rates``, ``owed``, ``time``)
+and the step index. It returns
+
+- ``None``: nothing changes;
+- a :class:`~qpcontact.Colony`: the colony to step from, e.g. with other growth rates
+  (``colony.replace(rates=...)``), or with some cells removed;
+- a :class:`StepControl`, which may also give extra momenta per cell (forces) and the division
+  rule of this step.
+
+On the command line: ``qpcontact simulate --model my_model.py``, where ``my_model.py`` defines
+``hook`` (:func:`load_hook`); ``examples/model_hook.py`` is a complete example.
+
+A hook that depends only on what it is given (the colony, its ids and time, the step) continues
+exactly when a run is resumed from a snapshot. A hook that needs random numbers can draw them
+from a generator seeded by the cell id (``np.random.default_rng([seed, id])``) so that they do
+not depend on the order of the calls; state a hook keeps for itself is not saved.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InvalidArgumentError, ModelHookError
+from .growth import Colony
+
+
+@dataclass
+class StepControl:
+    """What a hook sets for one step.
+
+    Attributes:
+        colony: the colony to step from (None: the one the hook was given).
+        drive: (N, 7) generalized momenta ``(p, L, g)`` per cell added to the run's own drive
+            (the sink towards the substrate in 3D), in momentum units [mass·µm/doubling time].
+            In the overdamped dynamics of ``qpcontact simulate`` a cell without contacts then
+            moves at ``p/m``: to push cell i at velocity v, ``drive[i, :3] = masses[i] * v``
+            (:func:`push`). The growth column is ignored (growth is set by ``rates``).
+        division_length: the length [µm] at which each cell divides after this step: a number
+            or an (N,) array (None: the run's ``division_length``). Daughters need
+            ``l/2 > radius``.
+    """
+
+    colony: Colony | None = None
+    drive: np.ndarray | None = None
+    division_length: float | np.ndarray | None = None
+
+
+#: A model hook: ``hook(colony, step) -> None | Colony | StepControl``.
+Hook = Callable[[Colony, int], Colony | StepControl | None]
+
+
+def push(colony: Colony, velocities: Any) -> np.ndarray:
+    """The (N, 7) drive that moves free cells at ``velocities`` ((N, 3) or (3,)) [µm/doubling
+    time] in the overdamped dynamics: ``p = m v`` (fixed cells, ``m = inf``, get 0)."""
+    masses = colony.cells.masses
+    drive = np.zeros((colony.cells.n, 7))
+    drive[:, :3] = np.where(np.isfinite(masses), masses, 0.0)[:, None] * np.broadcast_to(velocities, (colony.cells.n, 3))
+    return drive
+
+
+def apply_hook(hook: Hook | None, colony: Colony, step: int) -> StepControl:
+    """Call ``hook`` and check what it returns. The result always has ``colony`` set.
+
+    Raises:
+        ModelHookError: the hook raised (its exception is the cause), or returned something
+            else than None, a Colony or a StepControl, or a drive or division length of the
+            wrong shape or value.
+    """
+    try:
+        answer = None if hook is None else hook(colony, step)
+    except Exception as exc:  # the model's own code: reported with its traceback as the cause
+        raise ModelHookError(f"model hook at step {step} raised {type(exc).__name__}: {exc}") from exc
+    if answer is None:
+        return StepControl(colony)
+    if isinstance(answer, Colony):
+        return StepControl(answer)
+    if not isinstance(answer, StepControl):
+        raise ModelHookError(f"model hook at step {step}: returned {type(answer).__name__}; expected None, a "
+                                   "Colony or a StepControl")
+    control = StepControl(colony if answer.colony is None else answer.colony, answer.drive, answer.division_length)
+    if not isinstance(control.colony, Colony):
+        raise ModelHookError(f"model hook at step {step}: StepControl.colony must be a Colony")
+    n = control.colony.cells.n
+    if control.drive is not None:
+        control.drive = np.asarray(control.drive, dtype=float)
+        if control.drive.shape != (n, 7) or not np.all(np.isfinite(control.drive)):
+            raise ModelHookError(f"model hook at step {step}: drive must be a finite ({n}, 7) array, got shape "
+                                       f"{control.drive.shape}")
+    if control.division_length is not None:
+        length = np.asarray(control.division_length, dtype=float)
+        if length.shape not in ((), (n,)) or not np.all(np.isfinite(length) & (length > 0)):
+            raise ModelHookError(f"model hook at step {step}: division_length must be a number or an ({n},) "
+                                       "array, finite and > 0")
+        control.division_length = length
+    return control
+
+
+def load_hook(path: str | Path) -> Hook:
+    """The function ``hook`` of a Python file (a model script).
+
+    Raises:
+        InvalidArgumentError: the file is missing or defines no callable ``hook``. (An error
+            while the file runs propagates as it is: it is the model's own.)
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InvalidArgumentError(f"model {path}: no such file")
+    spec = importlib.util.spec_from_file_location(f"qpcontact_model_{path.stem}", path)
+    if spec is None or spec.loader is None:
+        raise InvalidArgumentError(f"model {path}: not a Python file")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    hook = getattr(module, "hook", None)
+    if not callable(hook):
+        raise InvalidArgumentError(f"model {path}: defines no function hook(colony, step)")
+    return hook

@@ -1,0 +1,89 @@
+"""Model hooks (qpcontact.colony.hooks): the user's per-step function sets growth rates, the
+division rule and extra forces; what it gets wrong is a named error that stops the run cleanly."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from qpcontact.cli import main
+from qpcontact.colony import StepControl, push
+from qpcontact.colony.runs import RunFolder
+from qpcontact.colony.simulate import Settings, run_colony
+from qpcontact.errors import ModelHookError
+
+SETTINGS = Settings(n_cells=10**6, max_dt=0.1, max_steps=30, rate_noise=0.0)
+
+
+def test_a_hook_sets_growth_rates_and_division_lengths():
+    calls, longest = [], {"hook": 0.0, "plain": 0.0}
+
+    def hook(colony, step):
+        calls.append(step)
+        longest["hook"] = max(longest["hook"], colony.cells.lengths.max())
+        rates = np.where(colony.ids % 2 == 0, 1.0, 0.0)  # odd ids stop growing
+        return StepControl(colony.replace(rates=rates), division_length=np.full(colony.cells.n, 3.0))
+
+    def watch(colony, step):
+        longest["plain"] = max(longest["plain"], colony.cells.lengths.max())
+
+    run = run_colony(SETTINGS, progress=False, hook=hook)
+    run_colony(SETTINGS, progress=False, hook=watch)
+    assert calls == list(range(SETTINGS.max_steps)) and not run.error
+    # Cells with odd ids do not grow: they keep their length at birth, half of 3 µm (and what
+    # grew in the last step) less a radius.
+    odd = run.colony.ids % 2 == 1
+    assert odd.any() and np.all((run.colony.cells.lengths[odd] >= 1.0) & (run.colony.cells.lengths[odd] < 1.2))
+    # Divided at 3 µm instead of 4.
+    assert longest["hook"] < 3.0 < 3.9 < longest["plain"]  # (what the hook sees: after division)
+
+
+def test_a_hook_pushes_cells_with_extra_momenta():
+    """A free cell driven at 1 µm per doubling time along x moves exactly that far."""
+    settings = Settings(n_cells=10**6, max_dt=0.1, max_steps=12, rate=0.0, rate_noise=0.0)
+    run = run_colony(settings, progress=False, hook=lambda colony, step: StepControl(drive=push(colony, [1.0, 0, 0])))
+    assert run.colony.cells.n == 1
+    assert run.colony.cells.centers[0] == pytest.approx([run.colony.time, 0.0, 0.0], abs=1e-9)
+
+
+def test_a_hook_may_return_a_colony_or_none():
+    seen = []
+
+    def hook(colony, step):
+        seen.append(colony.cells.n)
+        return colony.replace(rates=np.zeros(colony.cells.n)) if step >= 5 else None
+
+    run = run_colony(SETTINGS, progress=False, hook=hook)
+    assert run.colony.cells.n == seen[5]  # no growth after step 5, so no division
+
+
+@pytest.mark.parametrize("answer, message", [
+    (lambda colony: 3, "returned int; expected None, a Colony or a StepControl"),
+    (lambda colony: StepControl(drive=np.zeros((colony.cells.n, 6))), r"drive must be a finite \(1, 7\) array"),
+    (lambda colony: StepControl(division_length=-1.0), "division_length must be a number"),
+    (lambda colony: 1 / 0, "raised ZeroDivisionError: division by zero"),
+])
+def test_a_bad_hook_stops_the_run_with_a_named_error_and_the_state_saved(tmp_path, answer, message):
+    run = run_colony(SETTINGS, progress=False, hook=lambda colony, step: answer(colony),
+                     folder=RunFolder.create(tmp_path))
+    assert run.steps == 0 and re.search(message, run.error) and isinstance(run.exception, ModelHookError)
+    assert (tmp_path / "snapshots" / "step_000000.npz").exists()
+
+
+def test_simulate_runs_a_model_file_and_saves_it_in_the_settings(tmp_path, capsys):
+    model = tmp_path / "model.py"
+    model.write_text("import numpy as np\n\ndef hook(colony, step):\n"
+                     "    return colony.replace(rates=np.full(colony.cells.n, 2.0))\n")
+    out = tmp_path / "run"
+    assert main(["simulate", "--model", str(model), "--cells", "4", "--out", str(out), "--quiet"]) == 0
+    assert f'model = "{model}"' in (out / "config.toml").read_text()
+    broken = tmp_path / "broken.py"
+    broken.write_text("def hook(colony, step):\n    raise RuntimeError('my model is wrong')\n")
+    capsys.readouterr()
+    assert main(["simulate", "--model", str(broken), "--out", str(tmp_path / "b"), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "broken.py" in err and "my model is wrong" in err  # the model's own traceback
+    assert main(["simulate", "--model", str(tmp_path / "nosuch.py"), "--out", str(tmp_path / "c"), "--quiet"]) == 2
+    assert "nosuch.py: no such file" in capsys.readouterr().err

@@ -1,0 +1,248 @@
+"""Runs that lose nothing (qpcontact.colony.runs): the output folder is checked first, Ctrl-C
+saves the state reached, a resumed run continues the same trajectory bit for bit, and the
+settings travel with the run (config.toml, snapshots)."""
+
+from __future__ import annotations
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from qpcontact.cli import main
+from qpcontact.colony import simulate
+from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder, read_toml, write_toml
+from qpcontact.colony.simulate import Settings, run_colony
+from qpcontact.colony.snapshots import load_snapshot
+from qpcontact.errors import OutputFolderError
+
+#: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
+SETTINGS = Settings(n_cells=10**6, dimensions=3, max_dt=0.1, max_steps=48)
+TRAJECTORY = [name for name in HISTORY_FIELDS if name not in TIMING_FIELDS]
+
+
+def history(folder) -> list[dict[str, str]]:
+    with (folder / "history.csv").open(newline="") as fh:
+        return [{k: row[k] for k in TRAJECTORY} for row in csv.DictReader(fh)]
+
+
+def assert_identical(a, b) -> None:
+    for name in ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta",
+                 "growth_momenta"):
+        np.testing.assert_array_equal(getattr(a.cells, name), getattr(b.cells, name), err_msg=name)
+    for name in ("ids", "parent_ids", "rates", "owed"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert (a.time, a.next_id) == (b.time, b.next_id)
+
+
+@pytest.mark.parametrize("when", ["during a step", "between steps"])
+def test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, monkeypatch, when):
+    """Before, --start restarted the step counter at 0 and the random generator at the seed."""
+    full = run_colony(SETTINGS, progress=False, folder=RunFolder.create(tmp_path / "full"))
+    assert full.steps == SETTINGS.max_steps and full.colony.cells.n > 8 and not full.error
+
+    fired = []
+
+    def ctrl_c(step: int) -> None:
+        if step == 21 and not fired:
+            fired.append(step)
+            os.kill(os.getpid(), signal.SIGINT)
+
+    if when == "during a step":  # the model hook runs inside the step: the step is abandoned
+        hook = lambda colony, step: ctrl_c(step)  # noqa: E731
+    else:  # after the step's history row: the step is kept, the run stops after it
+        hook = None
+        append = RunFolder.append_history
+        monkeypatch.setattr(RunFolder, "append_history", lambda self, row: (append(self, row), ctrl_c(row["step"])))
+    part = run_colony(SETTINGS, progress=False, folder=RunFolder.create(tmp_path / "part"), snapshot_every=10, hook=hook)
+    stopped = 21 if when == "during a step" else 22
+    assert part.interrupted == signal.SIGINT and part.steps == stopped and not part.error
+    assert sorted(p.name for p in (tmp_path / "part" / "snapshots").iterdir()) == [
+        "step_000010.npz", "step_000020.npz", f"step_{stopped:06d}.npz"]
+    monkeypatch.undo()
+
+    snapshot = load_snapshot(tmp_path / "part" / "snapshots" / f"step_{stopped:06d}.npz")
+    resumed = run_colony(SETTINGS, start=snapshot, progress=False, folder=RunFolder.resume(tmp_path / "part", snapshot),
+                         snapshot_every=10)
+    assert (resumed.first_step, resumed.steps) == (stopped, SETTINGS.max_steps)
+    assert_identical(resumed.colony, full.colony)
+    assert history(tmp_path / "part") == history(tmp_path / "full")  # appended, one row per step
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_simulate_cleanly_and_resume_continues_it(tmp_path):
+    """Before: a KeyboardInterrupt traceback, no history, no pictures, no snapshot."""
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out), "--quiet",
+               "--snapshot-every", "0", "--max-dt", "0.1"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and process.poll() is None:
+        if (out / "history.csv").exists() and len((out / "history.csv").read_text().splitlines()) > 5:
+            break
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "Traceback" not in stderr and "--resume --out" in stderr
+    snapshots = sorted((out / "snapshots").glob("step_*.npz"))
+    assert len(snapshots) == 1
+    step = load_snapshot(snapshots[0]).step
+    assert len(history(out)) == step > 5
+    for name in ("colony.png", "history.png", "config.toml"):
+        assert (out / name).stat().st_size > 0, name
+    assert str(snapshots[0].parent) in stdout  # it says what it wrote
+
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", str(step + 3)]) == 0
+    assert [int(row["step"]) for row in history(out)] == list(range(step + 3))
+    assert load_snapshot(out / "snapshots" / f"step_{step + 3:06d}.npz").step == step + 3
+
+
+def test_an_output_folder_that_cannot_be_written_fails_before_the_run(tmp_path, monkeypatch, capsys):
+    """Before: the run went to the end and the final save_colony failed with a traceback."""
+    monkeypatch.setattr(simulate, "run_colony", lambda *a, **k: pytest.fail("the run started"))
+    (tmp_path / "file").write_text("")
+    assert main(["simulate", "--out", str(tmp_path / "file" / "run"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot write there" in err
+
+
+def test_an_output_folder_holding_another_run_is_refused_unless_overwrite(tmp_path, capsys):
+    """Before: overwritten silently, stale files kept."""
+    out = tmp_path / "run"
+    assert main(["simulate", "--cells", "2", "--out", str(out), "--quiet", "--snapshot-every", "1"]) == 0
+    before = sorted(p.name for p in (out / "snapshots").iterdir())
+    assert len(before) > 3
+    capsys.readouterr()
+    assert main(["simulate", "--cells", "2", "--out", str(out), "--quiet"]) == 2
+    assert "holds the outputs of an earlier run" in capsys.readouterr().err
+    assert sorted(p.name for p in (out / "snapshots").iterdir()) == before
+    assert main(["simulate", "--cells", "2", "--out", str(out), "--quiet", "--overwrite", "--snapshot-every", "0"]) == 0
+    assert len(list((out / "snapshots").iterdir())) == 1  # no stale snapshot of the earlier run
+
+
+def test_a_run_started_from_another_runs_snapshot_continues_its_numbering(tmp_path):
+    first = tmp_path / "first"
+    assert main(["simulate", "--cells", "4", "--out", str(first), "--quiet", "--snapshot-every", "5",
+                 "--max-dt", "0.1"]) == 0
+    start = first / "snapshots" / "step_000010.npz"
+    second = tmp_path / "second"
+    assert main(["simulate", "--start", str(start), "--out", str(second), "--quiet", "--max-steps", "13",
+                 "--snapshot-every", "0"]) == 0
+    assert [int(row["step"]) for row in history(second)] == [10, 11, 12]
+    assert history(second) == history(first)[10:13]  # the same trajectory: settings and random state travel along
+    assert [p.name for p in (second / "snapshots").iterdir()] == ["step_000013.npz"]
+    assert (first / "snapshots" / "step_000005.npz").exists()  # the first run is untouched
+
+
+def test_resuming_from_an_earlier_snapshot_of_the_same_run_needs_overwrite(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", "--cells", "4", "--out", str(out), "--quiet", "--snapshot-every", "5", "--max-dt", "0.1"]) == 0
+    rows = history(out)
+    capsys.readouterr()
+    assert main(["simulate", "--start", str(out / "snapshots" / "step_000005.npz"), "--out", str(out), "--quiet"]) == 2
+    assert "has snapshots after step 5" in capsys.readouterr().err
+    assert main(["simulate", "--start", str(out / "snapshots" / "step_000005.npz"), "--out", str(out), "--quiet",
+                 "--overwrite", "--snapshot-every", "0"]) == 0
+    assert history(out) == rows  # dropped after step 5, then the same steps again
+    assert sorted(p.name for p in (out / "snapshots").iterdir())[0] == "step_000005.npz"
+
+
+def test_a_history_that_does_not_belong_to_the_snapshot_is_refused(tmp_path):
+    out = tmp_path / "run"
+    assert main(["simulate", "--cells", "4", "--out", str(out), "--quiet", "--snapshot-every", "5", "--max-dt", "0.1"]) == 0
+    lines = (out / "history.csv").read_text().splitlines()
+    (out / "history.csv").write_text("\n".join(lines[:3]) + "\n")  # ends at step 1
+    snapshot = load_snapshot(out / "snapshots" / "step_000005.npz")
+    with pytest.raises(OutputFolderError, match="ends at step 1, but the snapshot is of step 5"):
+        RunFolder.resume(out, snapshot, overwrite=True)
+    (out / "history.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(OutputFolderError, match="not the history of a qpcontact run"):
+        RunFolder.resume(out, snapshot, overwrite=True)
+
+
+def test_resume_without_a_snapshot_is_a_one_line_error(tmp_path, capsys):
+    assert main(["simulate", "--resume", "--out", str(tmp_path / "nothing"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds no snapshot" in err
+
+
+def test_a_config_file_sets_the_run_flags_override_it_and_it_is_saved_with_the_run(tmp_path):
+    config = tmp_path / "run.toml"
+    config.write_text('n_cells = 3\nsolver = "osqp"\ntolerance = 1e-4\nmax_dt = 0.1\nseed = 7\nsnapshot_every = 4\n')
+    out = tmp_path / "run"
+    assert main(["simulate", "--config", str(config), "--seed", "8", "--out", str(out), "--quiet"]) == 0
+    saved = read_toml(out / "config.toml")
+    settings = {**Settings().to_dict(), "n_cells": 3, "solver": "osqp", "tolerance": 1e-4, "max_dt": 0.1, "seed": 8}
+    assert saved == {**settings, "snapshot_every": 4, "vtk": False, "gif": False}
+    assert load_snapshot(max((out / "snapshots").iterdir())).settings == settings
+    assert len(list((out / "snapshots").iterdir())) > 2
+    # The saved file runs the same run again.
+    again = tmp_path / "again"
+    assert main(["simulate", "--config", str(out / "config.toml"), "--out", str(again), "--quiet"]) == 0
+    assert history(again) == history(out)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("n_celss = 3\n", "unknown setting 'n_celss'"),
+    ('n_cells = "many"\n', "n_cells must be an integer"),
+    ("cfl = -1.0\n", "cfl: must be finite and > 0"),
+    ("[simulate]\nn_cells = 3\n", "simulate is a table or array"),
+    ("vtk = 1\n", "vtk must be true or false"),
+    ("snapshot_every = -2\n", "snapshot_every: must be an integer >= 0"),
+    ("n_cells = \n", "not a TOML file"),
+    ('solver = "nosuch"\n', "unknown solver 'nosuch'"),
+])
+def test_a_bad_config_file_is_a_one_line_error(tmp_path, capsys, text, message):
+    (tmp_path / "run.toml").write_text(text)
+    assert main(["simulate", "--config", str(tmp_path / "run.toml"), "--out", str(tmp_path / "run"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and not (tmp_path / "run").exists()
+
+
+def test_toml_round_trip_is_exact():
+    values = {**Settings().to_dict(), "tolerance": 1.0000000000000002e-06, "model": 'a "quoted" \\ name\n', "flag": True,
+              "big": float("inf")}
+    import tomllib
+
+    assert tomllib.loads(write_toml(values, "two\nlines")) == values
+
+
+@pytest.mark.parametrize("change, message", [
+    ({"seed": -1}, "seed: must be an integer >= 0"),
+    ({"max_steps": 2.5}, "max_steps: must be an integer >= 1"),
+    ({"dynamics": "wobbly"}, "dynamics: must be overdamped or inertial"),
+    ({"solver": "nosuch"}, "unknown solver 'nosuch'"),
+    ({"formulation": "nosuch"}, "formulation/form"),
+])
+def test_settings_no_run_can_use_are_refused_when_made(change, message):
+    from qpcontact.errors import QPContactError
+
+    with pytest.raises(QPContactError, match=message):
+        Settings(**change)
+
+
+@pytest.mark.slow
+def test_a_killed_run_leaves_whole_snapshots_and_resumes_with_a_contiguous_history(tmp_path):
+    """SIGKILL (no chance to save anything): the snapshots written so far are whole (written
+    atomically), the history may run past the last one, and --resume continues from it."""
+    out = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out),
+                                "--quiet", "--snapshot-every", "3", "--max-dt", "0.1"],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and len(list((out / "snapshots").glob("step_*.npz"))) < 4:
+        time.sleep(0.02)
+    process.kill()
+    process.wait(timeout=60)
+    snapshots = sorted((out / "snapshots").glob("step_*.npz"))
+    assert all(load_snapshot(p).step == int(p.stem[5:]) for p in snapshots)  # none truncated
+    last = load_snapshot(snapshots[-1]).step
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", str(last + 4)]) == 0
+    assert [int(row["step"]) for row in history(out)] == list(range(last + 4))
+    assert not [p for p in out.rglob(".*.tmp")]

@@ -1,0 +1,74 @@
+"""Every script in examples/ runs (at a small size) and does what it says."""
+
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+
+
+def run_example(name: str, *argv: str) -> int:
+    """The example's ``main(argv)``, in this process."""
+    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.main(list(argv))
+
+
+def test_every_example_is_tested():
+    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "performance_ab"}
+    assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
+
+
+def test_own_loop_clears_the_overlap(capsys):
+    assert run_example("own_loop", "--steps", "30") == 0
+    assert "final largest overlap 0.00e+00" in capsys.readouterr().out
+
+
+def test_a_colony_between_walls_stays_between_them(tmp_path, capsys):
+    assert run_example("channel", "--cells", "12", "--out", str(tmp_path)) == 0
+    assert (tmp_path / "channel.png").stat().st_size > 1000
+    assert "walls at 2 µm" in capsys.readouterr().out
+
+
+def test_a_3d_biofilm_is_exported_to_paraview(tmp_path, capsys):
+    pytest.importorskip("meshio", reason="the example needs qpcontact[vtk]")
+    from qpcontact.colony.paraview import read_series
+
+    assert run_example("biofilm_paraview", "--cells", "12", "--every", "10", "--out", str(tmp_path)) == 0
+    series = read_series(tmp_path / "colony.pvd")
+    assert len(series) >= 3 and all(f.exists() for _, f in series)
+    assert "open" in capsys.readouterr().out
+
+
+def test_a_solver_comparison_on_your_own_scene(capsys):
+    import qpcontact as qc
+
+    assert run_example("compare_solvers", "--cells", "20") == 0
+    out = capsys.readouterr().out
+    assert all(f"\n{solver} " in out for solver in qc.available_solvers())
+
+
+def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
+    assert run_example("model_hook", "--cells", "6", "--out", str(tmp_path / "script")) == 0
+    from qpcontact.cli import main
+
+    assert main(["simulate", "--model", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
+                 "--quiet"]) == 0
+
+
+def test_the_before_after_timing_runs_against_a_checkout():
+    """(It re-imports qpcontact from another folder, so it runs in its own process; here the
+    "old" checkout is this one.)"""
+    done = subprocess.run([sys.executable, str(EXAMPLES / "performance_ab.py"), str(ROOT), "--sizes", "200",
+                           "--dimensions", "2", "--repeats", "1", "--cache-dir", "none", "--solvers", "osqp/contact"],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "| 2D | 200 | detect |" in done.stdout and "| True |" in done.stdout
