@@ -181,7 +181,7 @@ def test_settings_and_arguments_are_checked():
     with pytest.raises(InvalidArgumentError, match="drive"):
         position_step(cells, 0.1, drive=np.zeros((2, 7)))
     with pytest.raises(InvalidArgumentError, match="takes no bounds"):
-        position_step(cells, 0.1, settings=PositionSettings(solver="mprgp"))
+        position_step(cells, 0.1, settings=PositionSettings(solver="linear"))
     with pytest.raises(InvalidArgumentError, match="growth_per_step"):
         growth_time_step(Colony.founder(cells, 1.0), growth_per_step=0.0)
 
