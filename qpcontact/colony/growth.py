@@ -256,16 +256,22 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
     return grown, out
 
 
-def growth_time_step(colony: Colony, *, growth_per_step: float = 0.035, max_dt: float = np.inf) -> float:
+def growth_time_step(colony: Colony, *, growth_per_step: float = 0.05, max_dt: float = np.inf,
+                     still: float = 0.02) -> float:
     """A time step in which the fastest-growing cell lengthens by ``growth_per_step`` of its
     length (``dt = ln(1 + g)/max rate``), at most ``max_dt``: the step is set by growth, not by
     the size of the colony (newborn cells paying the length owed at division grow up to twice as
-    fast). Raises :class:`~qpcontact.errors.InvalidArgumentError` for a growth per step that is
-    not a finite number > 0."""
-    if isinstance(growth_per_step, bool) or not (np.isfinite(growth_per_step) and growth_per_step > 0):
-        raise InvalidArgumentError(f"growth_per_step: must be a finite number > 0, got {growth_per_step!r}")
+    fast). ``still`` is the step when no cell grows.
+
+    Raises:
+        InvalidArgumentError: a growth per step, ``max_dt`` or ``still`` that is not a number > 0.
+    """
+    for name, value in (("growth_per_step", growth_per_step), ("max_dt", max_dt), ("still", still)):
+        if isinstance(value, bool) or not (value > 0) or np.isnan(value):
+            raise InvalidArgumentError(f"{name}: must be a number > 0, got {value!r}")
     rate = float(colony.rates.max(initial=0.0))
-    return float(max_dt) if rate <= 0 else min(float(max_dt), float(np.log1p(growth_per_step)) / rate)
+    step = float(np.log1p(growth_per_step)) / rate if rate > 0 else float(still)
+    return min(float(max_dt), step)
 
 
 def expansion_time_step(colony: Colony, *, max_dt: float, cfl: float = 0.2, dimensions: int = 2) -> float:

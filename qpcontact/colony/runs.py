@@ -49,7 +49,7 @@ from .snapshots import Snapshot, save_colony
 
 #: Columns of ``history.csv``, one row per step.
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
-                  "step_seconds", "penetration", "complementarity", "rejected")
+                  "step_seconds", "penetration", "complementarity", "rejected", "linearizations")
 #: Columns that measure the machine, not the trajectory (they differ between two runs of the
 #: same trajectory).
 TIMING_FIELDS = ("solve_seconds", "step_seconds")

@@ -3,12 +3,18 @@
 Units: lengths in µm (cells of radius 0.5 µm dividing at a cylinder length of 4 µm), time in
 mean doubling times (growth rate ln 2), masses in arbitrary units (mass = volume, growth inertia
 ``G`` = ``--growth-inertia`` × mass). Every step: the model hook, if any
-(:mod:`qpcontact.colony.hooks`), then the run's step function (:func:`step_function`:
-:func:`qpcontact.colony.grow` — growth drive, contact solve, move — with retries), then
-:func:`qpcontact.colony.divide`; the step size follows the colony's expansion
-(:func:`qpcontact.colony.expansion_time_step`, with the run's dimensions), and a step that turns
-some cell too fast (or, with ``--overlap-limit``, leaves too large an overlap) is retried with
-half the step (:func:`grow_with_retries`).
+(:mod:`qpcontact.colony.hooks`), then the run's step function (:func:`step_function`), then
+:func:`qpcontact.colony.divide`. Two steps (``--step``):
+
+- ``position`` (default): :func:`qpcontact.colony.grow_position`, non-penetration at the end of
+  the step (:mod:`qpcontact.colony.position`), with a time step set by growth
+  (:func:`qpcontact.colony.growth_time_step`: the fastest cell grows ``--growth-per-step`` of its
+  length); a step that does not reach the overlap tolerance is retried with half the step;
+- ``velocity`` (the earlier default, kept for comparison): :func:`qpcontact.colony.grow`,
+  contacts stop approaching at the start of the step, with a time step that follows the colony's
+  expansion (:func:`qpcontact.colony.expansion_time_step`), and a step that turns some cell too
+  fast (or, with ``--overlap-limit``, leaves too large an overlap) is retried with half the step
+  (:func:`grow_with_retries`).
 
 Outputs in ``--out`` (default ``./simulate-out``), checked before the run starts
 (:class:`qpcontact.colony.runs.RunFolder`):
@@ -46,12 +52,13 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..arguments import non_negative_float, non_negative_int, positive_float, positive_int, run_standalone
-from ..errors import InvalidArgumentError, ModelHookError, QPContactError, SolverFailedError
+from ..errors import InvalidArgumentError, ModelHookError, QPContactError, SolverFailedError, StepFailedError
 from ..geometry import Cells, capsule_volume
 from ..geometry.surfaces import substrate
 from ..solvers import FORMS, QP_FORMULATIONS, available_solvers, get_solver
-from .growth import Colony, divide, expansion_time_step, grow
+from .growth import Colony, divide, expansion_time_step, grow, grow_position, growth_time_step
 from .hooks import Hook, apply_hook, load_hook, push
+from .position import ContactImpulses, PositionSettings, PositionStepResult
 from .runs import HISTORY_FIELDS, Interrupt, RunFolder, is_inside, latest_snapshot, read_toml
 from .snapshots import Snapshot, load_snapshot
 from .step import StepResult, largest_overlap
@@ -95,10 +102,30 @@ class Settings:
     #: A Python file defining the model hook ``hook(colony, step)`` (:mod:`qpcontact.colony.hooks`);
     #: "" = none.
     model: str = ""
+    #: The step: "position" (non-penetration at the end of the step) or "velocity" (the earlier
+    #: velocity-level step; solver, formulation, form, tolerance, position_correction, margin,
+    #: cfl, max_halvings and overlap_limit are its settings).
+    step: str = "position"
+    #: The time-step rule: "growth" (the fastest cell grows growth_per_step of its length per
+    #: step), "expansion" (the colony's edge moves at most cfl diameters, at most max_dt), or
+    #: "auto" (growth for the position step, expansion for the velocity step).
+    time_step: str = "auto"
+    #: Growth of the fastest cell per step, for time_step "growth" [fraction of its length].
+    growth_per_step: float = 0.05
+    #: Largest overlap the position step may leave [fraction of the pair's diameter].
+    overlap_tolerance: float = 0.01
+    #: Largest displacement of a cell's tips by turning in one position step [cell diameters].
+    turn_limit: float = 0.2
+    #: The solver of the position step's linearizations (it must take bounds: ipm, mprgp, or a
+    #: qpsolvers backend in the primal form).
+    position_solver: str = "ipm"
+    #: Its tolerance [dimensionless, scaled units].
+    position_tolerance: float = 1e-3
 
     def __post_init__(self) -> None:
         """Reject settings no run can use, naming the setting."""
-        positive = ("cfl", "max_dt", "radius", "division_length", "growth_inertia", "tolerance")
+        positive = ("cfl", "max_dt", "radius", "division_length", "growth_inertia", "tolerance", "growth_per_step",
+                    "overlap_tolerance", "turn_limit", "position_tolerance")
         non_negative = ("margin", "position_correction", "rate", "rate_noise", "axis_noise", "damping", "sink_speed",
                         "overlap_limit")
         for name in positive + non_negative:
@@ -119,6 +146,33 @@ class Settings:
             raise InvalidArgumentError(f"formulation/form: expected one of {QP_FORMULATIONS} / auto, {', '.join(FORMS)}; "
                                        f"got {self.formulation!r} / {self.form!r}")
         get_solver(self.solver).plan(self.formulation, self.form)  # unknown, not installed or unsuitable: a named error
+        if self.step not in ("position", "velocity"):
+            raise InvalidArgumentError(f"step: must be position or velocity, got {self.step!r}")
+        if self.time_step not in ("auto", "growth", "expansion"):
+            raise InvalidArgumentError(f"time_step: must be auto, growth or expansion, got {self.time_step!r}")
+        if self.step == "position" and self.dynamics != "overdamped":
+            raise InvalidArgumentError("dynamics: the position step is overdamped; use step = velocity for inertial")
+        if self.step == "position":
+            self.position_settings()  # a solver that cannot bound the unknowns: a named error now
+
+    def position_settings(self) -> PositionSettings:
+        """The :class:`~qpcontact.colony.PositionSettings` of the position step.
+
+        Raises:
+            InvalidArgumentError: the position solver is unknown, not installed or takes no bounds.
+        """
+        if not get_solver(self.position_solver).bounds:
+            raise InvalidArgumentError(f"position_solver: {self.position_solver!r} takes no bounds on the unknowns "
+                                       "(use ipm, mprgp or a qpsolvers backend)")
+        return PositionSettings(overlap_tolerance=self.overlap_tolerance, turn_limit=self.turn_limit,
+                                solver=self.position_solver, tolerance=self.position_tolerance)
+
+    def time_step_of(self, colony: Colony) -> float:
+        """The time step of the next step from this colony (:attr:`time_step`)."""
+        rule = self.time_step if self.time_step != "auto" else ("growth" if self.step == "position" else "expansion")
+        if rule == "growth":
+            return growth_time_step(colony, growth_per_step=self.growth_per_step, still=self.max_dt)
+        return expansion_time_step(colony, max_dt=self.max_dt, cfl=self.cfl, dimensions=self.dimensions)
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as a plain mapping (for ``config.toml`` and snapshots)."""
@@ -193,14 +247,16 @@ class RunOptions:
 
 
 # (The functional form keeps the field types real types, not strings, for the API reference.)
-StepOutcome = NamedTuple("StepOutcome", [("colony", Colony), ("result", StepResult), ("dt", float), ("rejected", int)])  # noqa: UP014
+StepOutcome = NamedTuple("StepOutcome", [("colony", Colony), ("result", StepResult | PositionStepResult),  # noqa: UP014
+                                         ("dt", float), ("rejected", int)])
 StepOutcome.__doc__ = """What a run's step function returns (:func:`step_function`).
 
 Attributes:
     colony: the colony after the step, before division.
-    result: the step's :class:`~qpcontact.colony.StepResult` (its ``result`` — the
-        :class:`qpcontact.Result` of the contact solve, with ``contacts``, ``times`` and
-        ``errors`` — and ``max_overlap``, ``mean_overlap`` fill the history).
+    result: the step's :class:`~qpcontact.colony.StepResult` (velocity-level: its ``result`` —
+        the :class:`qpcontact.Result` of the contact solve, with ``contacts``, ``times`` and
+        ``errors`` — and ``max_overlap``, ``mean_overlap`` fill the history) or
+        :class:`~qpcontact.colony.PositionStepResult` (position-level).
     dt: the time step taken [doubling times].
     rejected: attempts rejected and retried with half the step.
 """
@@ -288,9 +344,44 @@ def step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunct
     from the snapshot a run resumes from, so that a step function can carry data from step to
     step exactly across an interruption (e.g. a solver's warm start). Replace its arrays, do not
     change them in place: an interrupted step's changes are undone by restoring the mapping.
-    This one, the velocity-level step with retries (:func:`grow_with_retries`), keeps none.
+    The velocity-level step with retries (:func:`grow_with_retries`) keeps none; the position
+    step (:func:`position_step_function`) keeps its contact impulses (``warm.*``).
     """
+    if settings.step == "position":
+        return position_step_function(settings, extra)
     return partial(grow_with_retries, settings=settings, **settings.step_options())
+
+
+#: The extra arrays of the position step's warm start (:class:`~qpcontact.colony.ContactImpulses`).
+WARM_ARRAYS = ("a", "b", "kind", "impulse")
+
+
+def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunction:
+    """The position-level step of a run (:func:`qpcontact.colony.grow_position`): the substrate
+    in 3D, the planar unknowns in 2D, the contact impulses of each step kept in ``extra`` as the
+    next one's warm start (and so restored on resume). A step that does not reach the overlap
+    tolerance is retried with half the step, up to ``max_halvings`` times; the last failure is
+    raised (:class:`~qpcontact.errors.StepFailedError`), never applied."""
+    position = settings.position_settings()
+    planar = settings.dimensions == 2
+    planes = [] if planar else [substrate(0.0)]
+
+    def take_step(colony: Colony, dt: float, *, drive: np.ndarray | None = None) -> StepOutcome:
+        warm = ContactImpulses(*(extra[f"warm.{name}"] for name in WARM_ARRAYS)) if "warm.a" in extra else None
+        for attempt in range(settings.max_halvings + 1):
+            try:
+                grown, out = grow_position(colony, dt, drive=drive, planes=planes, planar=True if planar else None,
+                                           settings=position, warm=warm)
+            except StepFailedError:
+                if attempt == settings.max_halvings:
+                    raise
+                dt /= 2.0
+                continue
+            extra.update({f"warm.{name}": getattr(out.warm, name) for name in WARM_ARRAYS})
+            return StepOutcome(grown, out, dt, attempt)
+        raise AssertionError("unreachable")
+
+    return take_step
 
 
 def initial_state(settings: Settings, start: Colony | Snapshot | None) -> tuple[Colony, int, np.random.Generator,
@@ -306,13 +397,25 @@ def initial_state(settings: Settings, start: Colony | Snapshot | None) -> tuple[
 
 def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float) -> dict[str, Any]:
     """One row of the history (:data:`HISTORY_FIELDS`): the step's index, the state after it and
-    what the step did."""
-    result = outcome.result.result
-    return dict(step=step, time=colony.time, dt=outcome.dt, cells=colony.cells.n, contacts=len(result.contacts),
-                max_overlap=outcome.result.max_overlap, mean_overlap=outcome.result.mean_overlap,
-                solve_seconds=result.times["setup"] + result.times["solve"], step_seconds=seconds,
+    what the step did. ``max_overlap``/``mean_overlap``: the velocity-level step's are those of
+    the state it starts from; the position step's those of the state it ends in (its
+    ``penetration`` is its largest shortfall below a contact's target, its ``complementarity``
+    is not measured)."""
+    out = outcome.result
+    common = dict(step=step, time=colony.time, dt=outcome.dt, cells=colony.cells.n, step_seconds=seconds,
+                  rejected=outcome.rejected)
+    if isinstance(out, PositionStepResult):
+        overlapping = -out.contacts.separation[out.contacts.separation < 0]
+        diameter = 2.0 * float(np.median(colony.cells.radii))
+        return dict(common, contacts=len(out.contacts), max_overlap=out.max_overlap,
+                    mean_overlap=float(overlapping.mean()) / diameter if overlapping.size else 0.0,
+                    solve_seconds=out.times["solve"], penetration=out.excess, complementarity=np.nan,
+                    linearizations=out.iterations)
+    result = out.result
+    return dict(common, contacts=len(result.contacts), max_overlap=out.max_overlap, mean_overlap=out.mean_overlap,
+                solve_seconds=result.times["setup"] + result.times["solve"],
                 penetration=result.errors.get("penetration", 0.0),
-                complementarity=result.errors.get("complementarity", np.nan), rejected=outcome.rejected)
+                complementarity=result.errors.get("complementarity", np.nan), linearizations=1)
 
 
 def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, progress: bool = True,
@@ -371,8 +474,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
                 with interrupt.armed():  # a signal now abandons the step: nothing of it is applied
                     control = apply_hook(hook, colony, step)
                     current = colony if control.colony is None else control.colony
-                    dt = expansion_time_step(current, max_dt=settings.max_dt, cfl=settings.cfl,
-                                             dimensions=settings.dimensions)
+                    dt = settings.time_step_of(current)
                     drive = push(current, [0.0, 0.0, -settings.sink_speed]) if not planar and settings.sink_speed else None
                     if control.drive is not None:
                         drive = control.drive if drive is None else drive + control.drive
@@ -456,7 +558,25 @@ SETTING_FLAGS: tuple[tuple[str, str, Callable[[str], Any], str, tuple[Any, ...] 
     ("--max-steps", "max_steps", positive_int, "stop at this step index (counted from the founder)", None),
     ("--model", "model", str, "a Python file defining hook(colony, step), called every step (examples/model_hook.py)",
      None),
+    ("--step", "step", str, "position: no overlap at the end of each step (default); velocity: contacts stop "
+     "approaching at its start (the earlier step; --solver, --tolerance, --margin, --position-correction, --cfl and "
+     "--overlap-limit are its settings)", ("position", "velocity")),
+    ("--time-step", "time_step", str, "growth: the fastest cell grows --growth-per-step per step; expansion: the "
+     "colony's edge moves --cfl diameters per step (at most --max-dt); auto: growth for the position step, expansion "
+     "for the velocity step", ("auto", "growth", "expansion")),
+    ("--growth-per-step", "growth_per_step", positive_float,
+     "growth of the fastest cell per step [fraction of its length]", None),
+    ("--overlap-tolerance", "overlap_tolerance", positive_float,
+     "largest overlap a position step may leave [fraction of the pair's diameter]", None),
+    ("--turn-limit", "turn_limit", positive_float,
+     "largest displacement of a cell's tips by turning in one position step [cell diameters]", None),
+    ("--position-solver", "position_solver", str, "solver of the position step (it must take bounds: ipm, mprgp, or a "
+     "qpsolvers backend)", None),
+    ("--position-tolerance", "position_tolerance", positive_float,
+     "tolerance of the position step's solver [dimensionless, scaled units]", None),
 )
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``qpcontact simulate``."""
     parser.description = ("Grow a colony from one cell (or from a snapshot), with snapshots, history, pictures and, with "

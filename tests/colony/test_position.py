@@ -190,9 +190,10 @@ def test_growth_time_step_follows_growth_not_colony_size():
     small = Colony.founder(rods([[0, 0, 0]], [[1, 0, 0]], 2.0), np.log(2.0))
     big_cells = scenes.colony_2d(500, 0)
     big = Colony.founder(big_cells, np.log(2.0))
-    assert growth_time_step(small) == pytest.approx(np.log1p(0.035) / np.log(2.0))
+    assert growth_time_step(small, growth_per_step=0.035) == pytest.approx(np.log1p(0.035) / np.log(2.0))
     assert growth_time_step(big) == growth_time_step(small)
     assert growth_time_step(small, max_dt=0.01) == 0.01
+    assert growth_time_step(Colony.founder(small.cells, 0.0), still=0.03) == 0.03
 
 
 def test_a_grown_colony_stays_free_of_overlap_over_many_steps():

@@ -22,7 +22,7 @@ from qpcontact.colony.snapshots import load_snapshot
 from qpcontact.errors import OutputFolderError
 
 #: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
-SETTINGS = Settings(n_cells=10**6, dimensions=3, max_dt=0.1, max_steps=48)
+SETTINGS = Settings(n_cells=10**6, dimensions=3, max_dt=0.1, growth_per_step=0.1, max_steps=48)
 TRAJECTORY = [name for name in HISTORY_FIELDS if name not in TIMING_FIELDS]
 
 

@@ -85,7 +85,8 @@ def test_the_time_step_follows_the_expansion_of_a_colony_of_the_runs_dimensions(
         return real(colony, **kwargs)
 
     monkeypatch.setattr(simulate, "expansion_time_step", spy)
-    run = simulate.run_colony(simulate.Settings(n_cells=2, dimensions=dimensions, max_steps=3), progress=False)
+    settings = simulate.Settings(n_cells=2, dimensions=dimensions, max_steps=3, step="velocity")
+    run = simulate.run_colony(settings, progress=False)
     assert not run.error and passed == [dimensions] * run.steps
 
 
