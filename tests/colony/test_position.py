@@ -65,7 +65,7 @@ def test_two_rods_end_to_end_are_pushed_apart_by_the_growth():
     cells = rods([[-2.5, 0, 0], [2.5, 0, 0]], [[1, 0, 0], [1, 0, 0]], 4.0)
     dt = 0.05
     drive = growing(cells, dt=dt)
-    out = position_step(cells, dt, drive=drive)
+    out = position_step(cells, dt, drive=drive, settings=PositionSettings(aim=0.0))
     assert out.converged
     grown = 4.0 * np.expm1(np.log(2.0) * dt)
     # Compressing growth costs G = 1000 m: the push shortens each rod by a thousandth-ish of Δl.
@@ -74,6 +74,10 @@ def test_two_rods_end_to_end_are_pushed_apart_by_the_growth():
     assert -0.01 <= separation <= 1e-6
     assert np.allclose(out.cells.centers[:, 1:], 0.0) and np.allclose(out.cells.axes, [[1, 0, 0]] * 2)
     assert np.isclose(out.cells.centers[0, 0], -out.cells.centers[1, 0])
+    # By default the linearizations aim at a gap of 0.01 diameters: the rods end that far apart.
+    aimed = position_step(cells, dt, drive=drive)
+    gap = aimed.cells.centers[1, 0] - aimed.cells.centers[0, 0] - aimed.cells.lengths.mean() - 1.0
+    assert gap == pytest.approx(0.01, abs=1e-3)
 
 
 def test_a_rod_sinking_onto_a_plane_comes_to_rest_on_it():
@@ -106,7 +110,7 @@ def test_impulses_only_push_and_the_velocity_level_answer_agrees_for_a_small_ste
     cells = rods([[0, 0, 0], [0.5, 1.0, 0], [5.0, 0.1, 0]], [[1, 0, 0], [1, 0, 0], [1, 0, 0]], 4.0)
     dt = 1e-3
     drive = growing(cells, dt=dt)
-    out = position_step(cells, dt, drive=drive)
+    out = position_step(cells, dt, drive=drive, settings=PositionSettings(aim=0.0))
     assert out.converged
     assert np.all(out.contact_impulses >= 0)
     velocity = qc.step(cells, dt, drive=drive, margin=0.5, solver="clarabel", tolerance=1e-10)
@@ -175,6 +179,8 @@ def test_settings_and_arguments_are_checked():
         PositionSettings(max_iterations=0)
     with pytest.raises(InvalidArgumentError, match="trust"):
         PositionSettings(trust=2.0)
+    with pytest.raises(InvalidArgumentError, match="aim: must be a finite number >= 0"):
+        PositionSettings(aim=-0.1)
     cells = rods([[0, 0, 0]], [[1, 0, 0]], 2.0)
     with pytest.raises(InvalidArgumentError, match="dt"):
         position_step(cells, -1.0)
