@@ -34,9 +34,10 @@ built-in ``"ipm"``, or a qpsolvers backend in the primal form):
   where the linearization is poor);
 - *shrinking*: no cell gets shorter (growth can be compressed to zero, not reversed).
 
-An iteration that makes the largest overlap grow halves the following updates (an SQP iterate can
-alternate between two states when a contact carries a large impulse and its curvature is
-ignored).
+An iteration that makes the largest overlap grow on a contact it already knew halves the
+following updates (an SQP iterate can alternate between two states when a contact carries a
+large impulse and its curvature is ignored); a larger overlap on a contact found only then (a
+cell pushed into a neighbour beyond the search margin) is left to the next full update.
 
 A step that does not reach the tolerance within ``max_iterations`` raises
 :class:`~qpcontact.errors.StepFailedError` (its result attached, with ``converged=False``) or,
@@ -417,11 +418,19 @@ def position_step(
         # Every linearization searches the whole margin: a pair just beyond it can come into
         # contact within one linearization when a short cell turns (measured on a grown colony of
         # 10⁴ cells: 0.14 of a diameter from a pair first found at the seventh linearization).
+        known = found.key(n_planes, n)  # the contacts of the last linearization
         found = found.union(_detect(now, planes, reach, planar), n_planes, n)
         contacts = _evaluate(now, found, planes, planar)
         times["detect"] += time.perf_counter() - t0
         diameter = _diameters(now, contacts)
         overlaps.append(float(np.max(-contacts.separation / diameter, initial=0.0)))
+        # A linearization that left a larger overlap on a contact it knew has met the curvature of
+        # turning (an SQP iterate can then alternate between two states): later updates go half
+        # way. A larger overlap on a contact found only now (a cell pushed far, into a neighbour
+        # beyond the search margin) says nothing about the linearization: full updates go on.
+        worst = int(np.argmax(-contacts.separation / diameter)) if len(contacts) else -1
+        if len(overlaps) >= 2 and overlaps[-1] > overlaps[-2] and np.isin(found.key(n_planes, n)[worst], known):
+            relaxation = 0.5
         target = np.zeros(len(contacts))
         if floor_keys.size:
             keys = pair_key(contacts)
@@ -474,8 +483,6 @@ def position_step(
             span = np.maximum(upper[turning] - lower[turning], 1e-300)
             at_bound = (np.minimum(out.y[turning] - lower[turning], upper[turning] - out.y[turning]) <= 1e-3 * span)
             turn_limited = int(np.unique(system.column_cell[turning[at_bound]]).size)
-        if len(overlaps) >= 2 and overlaps[-1] > overlaps[-2]:
-            relaxation = 0.5
         impulses = impulses + relaxation * (system.to_impulses(out.y) - impulses)
     end = move(cells, dt, drive + impulses)
     contacts = _evaluate(end, found, planes, planar)
