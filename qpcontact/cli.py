@@ -23,7 +23,9 @@ COMMANDS = {
     "simulate": ("qpcontact.colony.simulate", "grow a colony: snapshots, history, pictures, ParaView files"),
     "compare": ("qpcontact.studies.compare", "solver comparison: error against run time on colony scenes"),
     "stability": ("qpcontact.studies.stability", "run every solver on the catalogue of stiff and extreme cases"),
-    "bench": ("qpcontact.studies.bench", "time each phase of a step at colony scale"),
+    "bench-grown": ("qpcontact.studies.grown", "time to grow a colony from one cell, and one step of a grown colony, "
+                    "for each step kind (the benchmark that counts)"),
+    "bench": ("qpcontact.studies.bench", "time each phase of a step on colony snapshots"),
 }
 
 

@@ -1,0 +1,285 @@
+"""``qpcontact bench-grown``: the benchmark that counts — colonies grown from one cell.
+
+A benchmark snapshot (:mod:`qpcontact.studies.bench`) is packed once and solved once; a colony
+grown by ``qpcontact simulate`` is jammed, nearly incompressible and stepped thousands of times,
+and its step costs 13–200 times the snapshot's (docs/performance.md). This benchmark measures that
+workload, every step kind side by side in one run on this machine:
+
+1. **Time to grow**: ``qpcontact simulate``'s run (:func:`qpcontact.colony.run_colony`, seed 1,
+   its defaults otherwise) from one cell, for each dimension and step (``position``, the
+   default; ``velocity``, the earlier step, stopped at ``--velocity-cells``): the wall time until
+   the colony first has each size in ``--sizes``, the steps and linearizations taken, the largest
+   overlap over the run (fraction of the diameter), the colony's doubling time over its last
+   doubling against the cells' own (growth bought by compressing cells shows here), and the peak
+   resident memory of the run's process. Each run is a child process (its memory is its own).
+2. **One step of a grown colony**: from the states the position runs reached at each size (saved
+   in ``--cache-dir``, reused by later benchmarks), one step with each step kind and solver
+   (median of ``--repeats`` steps from the same state): the position step with each of
+   ``--position-solvers``, the velocity step with Clarabel at 10⁻⁶ and OSQP at 10⁻³.
+3. **The peer**: CellModeller's time to each size from the step log of its own benchmark script
+   (``--peer-log``, the JSON written by ``run_cellmodeller.py``; run it in the same session, see
+   docs/performance.md), with its overlaps where the log has them.
+
+Writes ``grown.md`` (the tables, with the date, machine and load), ``grown.json`` (every number)
+and ``grown.png`` (cells against wall time) in ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
+from ..colony import Colony, PositionStepResult, Settings, load_colony, run_colony, save_colony
+from ..colony.simulate import step_function
+from ..outputs import atomic_write, describe_written, prepare_folder, write_text
+from .harness import guarded
+
+OUTPUTS = ("grown.md", "grown.json", "grown.png")
+#: The velocity step of one step (table 2): (label, settings changes).
+VELOCITY_SOLVES = (("velocity, clarabel 1e-6", dict(solver="clarabel", tolerance=1e-6)),
+                   ("velocity, osqp 1e-3", dict(solver="osqp", tolerance=1e-3)))
+
+
+def _settings(dimensions: int, step: str, n_cells: int, changes: dict[str, Any] | None = None) -> Settings:
+    return Settings(n_cells=n_cells, dimensions=dimensions, step=step, **(changes or {}))
+
+
+def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) -> dict[str, Any]:
+    """Grow one colony (``Settings(**settings)``) from one cell to the largest of ``sizes`` and
+    time it (run in a child process by :func:`run_growth`). The state at each size is saved in
+    ``save_dir`` (when given) as ``{dimensions}d-{size}.npz``."""
+    run_settings = Settings(**settings)
+    reached: dict[int, dict[str, float]] = {}
+    start = time.perf_counter()
+
+    def note(colony: Colony, step: int) -> None:
+        for size in sizes:
+            if colony.cells.n >= size and size not in reached:
+                reached[size] = dict(seconds=time.perf_counter() - start, step=step, time=colony.time,
+                                     cells=colony.cells.n)
+                if save_dir is not None:
+                    save_colony(Path(save_dir) / f"{run_settings.dimensions}d-{size}.npz", colony, step)
+
+    run = run_colony(run_settings, progress=False, hook=note)
+    note(run.colony, run.steps)  # the last state, which no hook call sees
+    history = run.history
+    cells, times = np.asarray(history["cells"], float), np.asarray(history["time"], float)
+    doubling = np.nan
+    if cells.size and cells[-1] >= 4:
+        half = np.flatnonzero(cells >= cells[-1] / 2)[0]
+        if cells[-1] > cells[half]:
+            doubling = float((times[-1] - times[half]) / np.log2(cells[-1] / cells[half]))
+    return dict(reached=reached, steps=run.steps, wall=run.wall_seconds, error=run.error,
+                max_overlap=float(max(history["max_overlap"], default=0.0)),
+                linearizations=int(np.sum(history["linearizations"])), cells=int(run.colony.cells.n),
+                own_doubling=float(np.log(2.0) / settings.get("rate", np.log(2.0))), doubling=doubling,
+                peak_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+
+
+def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[str, Any],
+              repeats: int) -> dict[str, Any]:
+    """Time ``repeats`` steps of kind ``step`` from the saved colony ``state`` (run in a child
+    process by :func:`run_step`): median seconds, linearizations, contacts, largest overlap after."""
+    colony, _ = load_colony(state)
+    settings = _settings(dimensions, step, 10**9, changes)
+    seconds, outcome = [], None
+    for _ in range(repeats):
+        extra: dict[str, np.ndarray] = {}
+        take_step = step_function(settings, extra)
+        dt = settings.time_step_of(colony)
+        drive = None
+        if dimensions == 3 and settings.sink_speed:
+            drive = np.zeros((colony.cells.n, 7))
+            drive[:, 2] = -settings.sink_speed * colony.cells.masses
+        t0 = time.perf_counter()
+        outcome = take_step(colony, dt, drive=drive)
+        seconds.append(time.perf_counter() - t0)
+    assert outcome is not None
+    result = outcome.result
+    common = dict(label=label, seconds=float(np.median(seconds)), cells=colony.cells.n, dt=outcome.dt)
+    if isinstance(result, PositionStepResult):
+        return dict(common, contacts=len(result.contacts), linearizations=result.iterations,
+                    max_overlap=result.max_overlap)
+    return dict(common, contacts=len(result.result.contacts), linearizations=1, max_overlap=None)
+
+
+def run_growth(dimensions: int, step: str, sizes: list[int], n_cells: int, save_dir: Path | None,
+               timeout: float, changes: dict[str, Any] | None = None) -> dict[str, Any]:
+    """:func:`grow_once` in a child process with a time limit; the failure said, not hidden."""
+    settings = _settings(dimensions, step, n_cells, changes).to_dict()
+    status, value = guarded(grow_once, (settings, sizes, None if save_dir is None else str(save_dir)), timeout)
+    record = dict(dimensions=dimensions, step=step, target=n_cells, changes=changes or {})
+    if status == "ok":
+        return {**record, **value}
+    return {**record, "error": f"{status}: {value}" if value is not None else status}
+
+
+def run_step(state: Path, dimensions: int, label: str, step: str, changes: dict[str, Any], repeats: int,
+             timeout: float) -> dict[str, Any]:
+    status, value = guarded(step_once, (str(state), dimensions, label, step, changes, repeats), timeout)
+    if status == "ok":
+        return {**value, "dimensions": dimensions}
+    return dict(label=label, dimensions=dimensions, error=f"{status}: {value}" if value is not None else status)
+
+
+def peer_times(log_path: Path, sizes: list[int]) -> dict[str, Any]:
+    """CellModeller's wall time (sum of its steps' ``t_sim``) to each size, and its overlaps,
+    from the step log of ``run_cellmodeller.py``."""
+    log = json.loads(Path(log_path).read_text())["log"]
+    total, reached = 0.0, {}
+    worst = 0.0
+    for row in log:
+        total += float(row["t_sim"])
+        worst = max(worst, float(row.get("max_overlap", 0.0) or 0.0))
+        for size in sizes:
+            if row["n"] >= size and size not in reached:
+                reached[size] = dict(seconds=total, step=row["step"], cells=row["n"], max_overlap=worst)
+    return dict(reached=reached, steps=len(log))
+
+
+def machine() -> str:
+    load = os.getloadavg()
+    return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
+            f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min)")
+
+
+def _fmt(value: Any, digits: int = 1) -> str:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "–"
+    return f"{value:.{digits}f}" if isinstance(value, float) else str(value)
+
+
+def markdown(growth: list[dict[str, Any]], steps: list[dict[str, Any]], peer: dict[str, Any] | None,
+             sizes: list[int], meta: dict[str, Any]) -> str:
+    lines = [f"Measured {meta['date']} on {meta['machine']}; `{meta['command']}`.", "",
+             "**Time to grow from one cell** (wall seconds until the colony first has that many cells):", "",
+             "| dims | step | " + " | ".join(f"{s:,}" for s in sizes) + " | steps | linearizations | largest overlap "
+             "| colony doubling / cells' own | peak memory |",
+             "|---|---|" + "---|" * len(sizes) + "---|---|---|---|---|"]
+    for r in growth:
+        if "error" in r and r.get("reached") is None:
+            lines.append(f"| {r['dimensions']}D | {r['step']} | failed: {r['error'].splitlines()[0][:80]} |")
+            continue
+        cells = [_fmt(r["reached"].get(s, r["reached"].get(str(s), {})).get("seconds")) for s in sizes]
+        ratio = r["doubling"] / r["own_doubling"] if r["doubling"] == r["doubling"] else None
+        lines.append(f"| {r['dimensions']}D | {r['step']} | " + " | ".join(cells) +
+                     f" | {r['steps']} | {r['linearizations']} | {r['max_overlap']:.4f} | {_fmt(ratio, 2)} | "
+                     f"{r['peak_bytes'] / 2**30:.2f} GiB |" + (f" stopped: {r['error'][:60]}" if r.get("error") else ""))
+    if peer is not None:
+        cells = [_fmt(peer["reached"].get(s, peer["reached"].get(str(s), {})).get("seconds")) for s in sizes]
+        worst = max((v.get("max_overlap", 0.0) for v in peer["reached"].values()), default=0.0)
+        lines.append("| 2D | CellModeller (peer) | " + " | ".join(cells) +
+                     f" | {peer['steps']} | – | {worst / 1.0:.4f} µm | – | – |")
+    lines += ["", "**One step of a grown colony** (median seconds of the same step from the state the position run "
+              "reached; linearizations of the position step; largest overlap after it):", "",
+              "| dims | cells | step | seconds | contacts | linearizations | largest overlap |", "|---|---|---|---|---|---|---|"]
+    for r in steps:
+        if "error" in r:
+            lines.append(f"| {r['dimensions']}D | | {r['label']} | failed: {r['error'].splitlines()[0][:80]} | | | |")
+            continue
+        lines.append(f"| {r['dimensions']}D | {r['cells']:,} | {r['label']} | {r['seconds']:.3f} | {r['contacts']:,} | "
+                     f"{r['linearizations']} | {_fmt(r['max_overlap'], 4)} |")
+    return "\n".join(lines) + "\n"
+
+
+def plot(growth: list[dict[str, Any]], peer: dict[str, Any] | None, path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    figure = Figure(figsize=(6.5, 4.2))
+    ax = figure.add_subplot()
+    for r in growth:
+        if not r.get("reached"):
+            continue
+        points = sorted((int(k), v["seconds"]) for k, v in r["reached"].items())
+        ax.loglog([p[1] for p in points], [p[0] for p in points], "o-", label=f"{r['dimensions']}D {r['step']}")
+    if peer is not None and peer["reached"]:
+        points = sorted((int(k), v["seconds"]) for k, v in peer["reached"].items())
+        ax.loglog([p[1] for p in points], [p[0] for p in points], "s--", label="2D CellModeller")
+    ax.set_xlabel("wall time [s]")
+    ax.set_ylabel("cells")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--dimensions", type=comma_list(int, choices=("2", "3")), default=[2], metavar="LIST",
+                        help="comma-separated dimensions (default: 2)")
+    parser.add_argument("--sizes", type=comma_list(positive_int), default=[1000, 2000, 5000, 10000], metavar="LIST",
+                        help="comma-separated colony sizes to time and save [cells] (default: 1000,2000,5000,10000)")
+    parser.add_argument("--steps", type=comma_list(choices=("position", "velocity")), default=["position", "velocity"],
+                        metavar="LIST", help="step kinds to grow with (default: position,velocity)")
+    parser.add_argument("--velocity-cells", type=positive_int, default=2000, metavar="N",
+                        help="grow with the velocity step to this size only (default: 2000; it took 47 min to 10^4)")
+    parser.add_argument("--position-solvers", type=comma_list(str), default=["ipm"], metavar="LIST",
+                        help="solvers of the position step in the one-step table (default: ipm)")
+    parser.add_argument("--repeats", type=positive_int, default=3, help="steps timed per configuration in the one-step "
+                        "table, median kept (default: 3)")
+    parser.add_argument("--time-limit", type=positive_float, default=7200.0, metavar="S",
+                        help="wall-time limit of one growth run [s] (default: 7200)")
+    parser.add_argument("--peer-log", type=Path, metavar="FILE",
+                        help="CellModeller's step log (JSON of run_cellmodeller.py) to put in the table")
+    parser.add_argument("--cache-dir", type=Path, metavar="FOLDER",
+                        default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "qpcontact-grown",
+                        help="where grown states are saved and reused (default: ~/.cache/qpcontact-grown)")
+    parser.add_argument("--reuse", action="store_true", help="take the one-step table's states from --cache-dir "
+                        "without growing (the time-to-grow table is then left out)")
+    add_output_arguments(parser, "bench-grown", "grown.md, grown.json and grown.png")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    out = prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
+    args.cache_dir.mkdir(parents=True, exist_ok=True)
+    sizes = sorted(set(args.sizes))
+    growth: list[dict[str, Any]] = []
+    if not args.reuse:
+        for dimensions in args.dimensions:
+            for step in args.steps:
+                target = sizes[-1] if step == "position" else min(sizes[-1], args.velocity_cells)
+                marks = [s for s in sizes if s <= target]
+                print(f"growing {dimensions}D with the {step} step to {target:,} cells ...", flush=True)
+                record = run_growth(dimensions, step, marks, target,
+                                    args.cache_dir if step == "position" else None, args.time_limit)
+                print("   " + ("failed: " + record["error"] if "error" in record and "reached" not in record
+                               else f"{record['wall']:.1f} s, {record['steps']} steps, largest overlap "
+                                    f"{record['max_overlap']:.4f}"), flush=True)
+                growth.append(record)
+    steps: list[dict[str, Any]] = []
+    kinds = [(f"position, {name}", "position", dict(position_solver=name)) for name in args.position_solvers]
+    kinds += [(label, "velocity", changes) for label, changes in VELOCITY_SOLVES]
+    for dimensions in args.dimensions:
+        for size in sizes:
+            state = args.cache_dir / f"{dimensions}d-{size}.npz"
+            if not state.exists():
+                continue
+            for label, step, changes in kinds:
+                print(f"one step of the grown {dimensions}D colony of {size:,} cells: {label} ...", flush=True)
+                steps.append(run_step(state, dimensions, label, step, changes, args.repeats, args.time_limit))
+    peer = peer_times(args.peer_log, sizes) if args.peer_log else None
+    meta = dict(date=datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"), machine=machine(),
+                command="qpcontact bench-grown " + " ".join(sys.argv[2:] if sys.argv[1:2] == ["bench-grown"] else []))
+    written = [write_text(out / "grown.md", markdown(growth, steps, peer, sizes, meta)),
+               atomic_write(out / "grown.json", lambda fh: json.dump(dict(meta=meta, growth=growth, steps=steps,
+                                                                           peer=peer), fh, indent=1, default=float),
+                            text=True)]
+    plot(growth, peer, out / "grown.png")
+    written.append(out / "grown.png")
+    print((out / "grown.md").read_text())
+    print(describe_written(written))
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_standalone("qpcontact bench-grown", add_arguments, run_command, argv, (__doc__ or "").split("\n\n")[0])

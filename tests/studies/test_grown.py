@@ -1,0 +1,38 @@
+"""The grown-colony benchmark (qpcontact bench-grown): it grows colonies with each step kind, times
+one step of the grown states, reads the peer's log, and writes its table."""
+
+import json
+
+from qpcontact import cli
+from qpcontact.studies import grown
+
+
+def test_bench_grown_writes_its_tables(tmp_path):
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    code = cli.main(["bench-grown", "--sizes", "8,16", "--velocity-cells", "8", "--repeats", "1", "--out", str(out),
+                     "--cache-dir", str(cache)])
+    assert code == 0
+    data = json.loads((out / "grown.json").read_text())
+    growth = {(r["dimensions"], r["step"]): r for r in data["growth"]}
+    position, velocity = growth[(2, "position")], growth[(2, "velocity")]
+    assert set(position["reached"]) == {"8", "16"} and set(velocity["reached"]) == {"8"}
+    assert position["max_overlap"] <= 0.01 + 1e-9 and position["peak_bytes"] > 0
+    assert (cache / "2d-16.npz").exists()
+    labels = {(r["cells"] >= 16, r["label"]) for r in data["steps"]}
+    assert (True, "position, ipm") in labels and (True, "velocity, clarabel 1e-6") in labels
+    assert all("error" not in r for r in data["steps"])
+    text = (out / "grown.md").read_text()
+    assert "Time to grow" in text and "One step of a grown colony" in text
+    assert (out / "grown.png").stat().st_size > 1000
+    # the same folder again is refused unless --overwrite
+    assert cli.main(["bench-grown", "--sizes", "8", "--out", str(out), "--cache-dir", str(cache), "--reuse"]) == 2
+
+
+def test_peer_times_read_the_cellmodeller_log(tmp_path):
+    log = tmp_path / "log.json"
+    rows = [dict(step=i + 1, n=2 ** (i // 3), t_sim=0.5) for i in range(30)]
+    rows[15]["max_overlap"] = 0.12
+    log.write_text(json.dumps(dict(args={}, log=rows)))
+    peer = grown.peer_times(log, [8, 64])
+    assert peer["reached"][8]["seconds"] == 0.5 * 10 and peer["reached"][8]["step"] == 10
+    assert peer["reached"][64]["max_overlap"] == 0.12
