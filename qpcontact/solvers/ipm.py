@@ -76,22 +76,27 @@ class NormalMatrix:
         csc.sort_indices()
         k, n = csc.shape
         counts = np.diff(csc.indptr)
-        squares = counts.astype(np.int64) ** 2
-        column = np.repeat(np.arange(n), squares)
-        offset = np.arange(int(squares.sum())) - np.repeat(np.cumsum(squares) - squares, squares)
-        width = np.repeat(counts, squares)
-        first = csc.indptr[column] + offset // np.maximum(width, 1)
-        second = csc.indptr[column] + offset % np.maximum(width, 1)
-        row_i, row_j = csc.indices[first], csc.indices[second]
-        lower = row_i >= row_j
-        self.first, self.second = first[lower].astype(np.int32), second[lower].astype(np.int32)
-        self.column = column[lower].astype(np.int32)
+        # The pairs (i ≥ j) of each column, generated for all columns with the same number of
+        # entries at once (a few distinct counts: a loop over counts, not over columns).
+        firsts, seconds, columns = [], [], []
+        for m in np.unique(counts[counts > 0]):
+            cols = np.flatnonzero(counts == m)
+            i, j = np.tril_indices(int(m))
+            start = csc.indptr[cols][:, None]
+            firsts.append((start + i).ravel())
+            seconds.append((start + j).ravel())
+            columns.append(np.repeat(cols, i.size))
+        first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
+        second = np.concatenate(seconds) if seconds else np.zeros(0, dtype=np.int64)
+        row_i, row_j = csc.indices[first], csc.indices[second]  # sorted rows: row_i ≥ row_j
+        self.first, self.second = first.astype(np.int32), second.astype(np.int32)
+        self.column = (np.concatenate(columns) if columns else np.zeros(0, dtype=np.int64)).astype(np.int32)
         # The pattern (with the whole diagonal) from scipy's sparse product, in CSC order; each
         # product's place in it by a binary search of its (column, row) key.
         pattern = sp.tril(abs(csc) @ abs(csc).T + sp.identity(k, format="csc"), format="csc")
         pattern.sort_indices()
         keys = np.repeat(np.arange(k, dtype=np.int64), np.diff(pattern.indptr)) * k + pattern.indices
-        self.position = np.searchsorted(keys, row_j[lower].astype(np.int64) * k + row_i[lower]).astype(np.int32)
+        self.position = np.searchsorted(keys, row_j.astype(np.int64) * k + row_i).astype(np.int32)
         self.diagonal_position = np.searchsorted(keys, np.arange(k, dtype=np.int64) * (k + 1))
         self.size = keys.size
         self.shape = (k, k)
