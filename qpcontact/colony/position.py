@@ -392,13 +392,13 @@ def position_step(
     reach = settings.margin * 2.0 * float(np.median(cells.radii)) if n else 0.0
     # Overlap at the start of the step sets the floor of its own pair's target.
     t0 = time.perf_counter()
-    start = _evaluate(cells, _detect(cells, planes, 0.0, planar), planes, planar)
+    start_found = _detect(cells, planes, 0.0, planar)
+    start = _evaluate(cells, start_found, planes, planar)
     start_diameter = _diameters(cells, start)
     start_overlap = float(np.max(-start.separation / start_diameter, initial=0.0))
     n_planes = len(planes)
-    pair_key = lambda c: c.cell_a.astype(np.int64) * (n + n_planes) + (c.cell_b + n_planes)  # noqa: E731
     overlapping = start.separation < 0
-    floor_keys = pair_key(start)[overlapping]
+    floor_keys = start_found.key(n_planes, n)[overlapping] // 8  # a pair (or a cell and a plane)
     floor_value = start.separation[overlapping] + settings.relaxation * start_diameter[overlapping]
     order = np.argsort(floor_keys)
     floor_keys, floor_value = floor_keys[order], floor_value[order]
@@ -415,9 +415,10 @@ def position_step(
     for iteration in range(settings.max_iterations + 1):
         now = move(cells, dt, drive + impulses)
         t0 = time.perf_counter()
-        # Every linearization searches the whole margin: a pair just beyond it can come into
-        # contact within one linearization when a short cell turns (measured on a grown colony of
-        # 10⁴ cells: 0.14 of a diameter from a pair first found at the seventh linearization).
+        # Every linearization searches the whole margin: a cell pushed out of a jam can move a
+        # diameter against a neighbour within one linearization (measured on a grown colony of
+        # 10⁴ cells, with half the margin after the first: 0.14 of a diameter of overlap at the
+        # seventh linearization, with a pair found only then).
         known = found.key(n_planes, n)  # the contacts of the last linearization
         found = found.union(_detect(now, planes, reach, planar), n_planes, n)
         contacts = _evaluate(now, found, planes, planar)
@@ -433,7 +434,7 @@ def position_step(
             relaxation = 0.5
         target = np.zeros(len(contacts))
         if floor_keys.size:
-            keys = pair_key(contacts)
+            keys = found.key(n_planes, n) // 8
             where = np.minimum(np.searchsorted(floor_keys, keys), floor_keys.size - 1)
             target = np.where(floor_keys[where] == keys, np.minimum(0.0, floor_value[where]), 0.0)
         shortfall = (target - contacts.separation) / diameter
@@ -484,9 +485,7 @@ def position_step(
             at_bound = (np.minimum(out.y[turning] - lower[turning], upper[turning] - out.y[turning]) <= 1e-3 * span)
             turn_limited = int(np.unique(system.column_cell[turning[at_bound]]).size)
         impulses = impulses + relaxation * (system.to_impulses(out.y) - impulses)
-    end = move(cells, dt, drive + impulses)
-    contacts = _evaluate(end, found, planes, planar)
-    diameter = _diameters(end, contacts)
+    end = now  # the loop always ends on a detection at the positions of the impulses it kept
     key_a, key_b = ids[found.a], np.where(found.b >= 0, ids[np.maximum(found.b, 0)], found.b)
     impulse_of_contact = last.lookup(key_a, key_b, found.kind)
     times["total"] = time.perf_counter() - t_start
