@@ -17,9 +17,18 @@ from ..solvers import FORMS, FORMULATIONS, Problem, get_solver, solve, solve_min
 from ..solvers.registry import check_options
 from . import metrics
 
-#: A QP answer is accepted when each measure of :func:`acceptance_failure` is at most this many
-#: times the tolerance.
+#: An answer is accepted when each measure of :func:`acceptance_failure` is at most this many
+#: times the tolerance ...
 ACCEPT_FACTOR = 100.0
+#: ... and at most this, whatever the tolerance: a loose tolerance (``100·tolerance >= 1`` from
+#: 0.01 on) must still reject answers that are wrong (issue 13, item 8).
+ACCEPT_CAP = 0.1
+
+
+def acceptance_limit(tolerance: float) -> float:
+    """The bound every accepted answer meets in each measure of :func:`acceptance_failure`:
+    ``min(ACCEPT_FACTOR·tolerance, ACCEPT_CAP)`` (dimensionless)."""
+    return min(ACCEPT_FACTOR * tolerance, ACCEPT_CAP)
 
 
 @dataclass
@@ -98,23 +107,27 @@ def _check_options(solver: str, formulation: str, form: str, tolerance: float, t
 def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, lam: np.ndarray | None,
                        tolerance: float) -> str:
     """Why a reported solution is not accepted, or ``""`` when it is (docs/model-notes.md,
-    "Accepting a QP answer"). Each measure must be at most ``ACCEPT_FACTOR·tolerance``:
+    "Accepting an answer"). What ``tolerance`` promises: each measure below, in the scaled units
+    of :mod:`qpcontact.assembly.system` (``max b̃ = 1``), is at most
+    :func:`acceptance_limit` ``= min(ACCEPT_FACTOR·tolerance, ACCEPT_CAP)``, for every solver:
 
-    - both QP formulations: the penetration;
-    - complementarity, where contact impulses are given: the relative duality gap (feasible but
-      not optimal, e.g. impulses larger than needed), the multiplier inconsistency (impulses
-      that are not equal and opposite contact impulses) and the most negative, pulling contact
-      impulse relative to the largest;
+    - every formulation, the plain one included: the penetration
+      ``max(0, max(b̃ − B̃ỹ))`` (the plain solve of an inconsistent ``Mx = b``, e.g. a cell
+      squeezed between fixed cells with position correction, leaves contacts approaching: not
+      an answer);
+    - complementarity: the complementarity residual ``‖min(λ̃, B̃ỹ − b̃)‖∞`` (the error measure
+      of the problem: 0 exactly at the optimum; an answer without contact impulses is refused,
+      since it cannot be checked), the relative duality gap, the multiplier inconsistency and the
+      most negative (pulling) contact impulse relative to the largest;
     - least_squares, when ``Mx = b`` is consistent: the overshoot of ``B̃ỹ = b̃``.
 
-    The plain problem (formulation ``"linear"``) is not checked here: its solution may
-    penetrate (an inconsistent ``Mx = b``) or pull by design; the linear solve checks its own
-    optimality."""
-    if formulation == "linear":
-        return ""
-    limit = ACCEPT_FACTOR * tolerance
+    The plain problem's answer may pull by design (negative contact impulses are not checked)."""
+    limit = acceptance_limit(tolerance)
     checks = {"penetrates by": metrics.penetration(system, y)}
-    if formulation == "complementarity" and lam is not None:
+    if formulation == "complementarity":
+        if lam is None:
+            return "the answer has no contact impulses, so its complementarity cannot be checked"
+        checks["has complementarity residual"] = metrics.complementarity_residual(system, y, lam)
         # Feasible but not optimal (e.g. impulses larger than needed) shows up here.
         checks["has relative duality gap"] = metrics.duality_gap(system, y, lam)
         # Impulses that are not equal and opposite contact impulses (primal form: ỹ and the
@@ -136,7 +149,10 @@ def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, l
             checks["overshoots by"] = overshoot
     for what, value in checks.items():
         if not value <= limit:
-            return f"the answer {what} {value:.3g} (> {limit:.3g} = {ACCEPT_FACTOR:g}·tolerance)"
+            if formulation == "linear" and what == "penetrates by":
+                return (f"the answer {what} {value:.3g} (> {limit:.3g}): Mx = b has no solution (more contacts "
+                        "than the cells can satisfy, e.g. with position correction); use a QP formulation")
+            return f"the answer {what} {value:.3g} (> {limit:.3g} = min({ACCEPT_FACTOR:g}·tolerance, {ACCEPT_CAP:g}))"
     return ""
 
 
@@ -218,8 +234,12 @@ def resolve(
         form: ``"primal"``, ``"contact"`` or ``"auto"`` (see
             :mod:`qpcontact.solvers.qpsolvers_bridge`; ``"auto"``:
             :data:`qpcontact.solvers.DEFAULT_FORM`).
-        tolerance: relative tolerance handed to the solver (dimensionless: the problem is scaled
-            so that ``max b = 1``).
+        tolerance: what the answer promises (dimensionless: the problem is scaled so that
+            ``max b = 1``): its penetration and, for complementarity, its complementarity
+            residual ``‖min(λ̃, B̃ỹ − b̃)‖∞`` (with its duality gap, multiplier inconsistency and
+            pulling) are at most ``min(100·tolerance, 0.1)``
+            (:func:`~qpcontact.resolve.resolve.acceptance_failure`), whatever the solver;
+            otherwise the answer is not accepted.
         margin: contacts closer than this also count [length].
         position_correction: β in ``b = −u + β·max(0, −d)/dt`` (0 = off); needs ``dt``.
         dt: the time step [time], for position correction.
@@ -230,7 +250,10 @@ def resolve(
             detection of contacts (:meth:`Cells.is_monolayer`) and for the system alike.
         scale: nondimensionalize the system (default; see :mod:`qpcontact.assembly.system`). ``False``
             hands the solvers the system in the caller's units (for measurements only).
-        time_limit: seconds the solver may take, where the backend supports it.
+        time_limit: seconds the solver may take, where it supports a limit
+            (:attr:`SolverSpec.time_limit`); a factorization is not interrupted (Clarabel,
+            OSQP), and PIQP, ProxQP and the plain solve take none: docs/solvers.md, "Time
+            limits".
         regularization: ε of the least_squares formulation (dimensionless; default 0 = the exact
             minimum-W-norm selection).
         solver_settings: extra solver options: a qpsolvers backend's own options, passed
