@@ -9,10 +9,11 @@ from typing import Any
 
 import numpy as np
 
+from ..arguments import flag, instance, mapping, number
 from ..assembly.system import ContactSystem, build_system
-from ..errors import InvalidArgumentError, SolverFailedError
+from ..errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
 from ..geometry.cells import Cells
-from ..geometry.contacts import Contacts, colliding, find_contacts
+from ..geometry.contacts import Contacts, check_contacts, colliding, find_contacts
 from ..solvers import FORMS, FORMULATIONS, Problem, get_solver, solve, solve_min_norm
 from ..solvers.registry import check_options
 from . import metrics
@@ -176,7 +177,8 @@ def solve_system(
     times)."""
     spec = get_solver(solver)
     formulation, form = spec.plan(formulation, form)
-    settings = dict(solver_settings or {})
+    settings = mapping("solver_settings", solver_settings)
+    estimate_condition = flag("estimate_condition", estimate_condition)
     # A solver that can estimate the condition from its own factorization takes the setting.
     own_estimate = "estimate_condition" in (spec.settings or ())
     if estimate_condition and own_estimate:
@@ -275,8 +277,18 @@ def resolve(
         SolverFailedError: the solver failed, did not converge, or its answer fails the checks.
     """
     solved, solved_form = _check_options(solver, formulation, form, tolerance, time_limit, on_failure)
+    instance("cells", cells, Cells, "qpcontact.Cells", InvalidCellsError)
+    reduce, scale, estimate_condition, keep_separating = (flag(name, value) for name, value in (
+        ("reduce", reduce), ("scale", scale), ("estimate_condition", estimate_condition),
+        ("keep_separating", keep_separating)))
+    planar = flag("planar", planar, allow_none=True)
+    margin = number("margin", margin, minimum=0.0)
+    regularization = number("regularization", regularization, minimum=0.0)
+    solver_settings = mapping("solver_settings", solver_settings)
     t_start = time.perf_counter()
-    if contacts is None:
+    if contacts is not None:
+        check_contacts(contacts, cells)
+    else:
         # Detection gets the planar decision the system will make (issue 13, item 2): a
         # monolayer's crossing axes must not get the out-of-plane normal â × b̂.
         contacts = find_contacts(cells, margin, planar=planar)
