@@ -71,10 +71,19 @@ def test_an_answer_beyond_the_promised_residual_is_refused(monkeypatch):
 
 @pytest.mark.parametrize("tolerance", [0.999, 0.5])
 def test_a_loose_tolerance_still_refuses_garbage(tolerance):
-    """100·tolerance >= 1 accepted anything: MPRGP at 0.999 was accepted with penetration 0.38."""
-    result = qc.resolve(scenes.colony_2d(500, 1), solver="mprgp", tolerance=tolerance, on_failure="return")
-    assert not result.converged and result.errors["penetration"] > 0.1
-    assert "min(100·tolerance, 0.1)" in result.message
+    """100·tolerance >= 1 accepted anything: MPRGP at 0.999 was accepted with penetration 0.38.
+    Its answer at that tolerance is refused now; the one at a tenth of it keeps the cap."""
+    from qpcontact.resolve import acceptance_failure
+    from qpcontact.solvers import Problem, solve
+
+    cells = scenes.colony_2d(500, 1)
+    system = qc.resolve(cells, solver="mprgp").system
+    first = solve(Problem.of(system), "mprgp", tolerance=tolerance)
+    assert first.found and metrics.penetration(system, first.y) > 0.1
+    assert "min(100·tolerance, 0.1)" in acceptance_failure(system, "complementarity", first.y, first.lam, tolerance)
+    result = qc.resolve(cells, solver="mprgp", tolerance=tolerance, on_failure="return")
+    assert result.converged and result.status.endswith(f"(again at {tolerance / 10:g})")
+    assert result.errors["penetration"] <= 0.1 and result.errors["complementarity"] <= 0.1
 
 
 def squeezed():
@@ -99,3 +108,32 @@ def test_the_plain_solve_of_an_inconsistent_system_is_refused():
     # without position correction the same scene is consistent and accepted
     moving = cells.replace(momenta=[[0, 1.0, 0], [0, 0, 0], [0, 0, 0]])
     assert qc.resolve(moving, solver="linear").converged
+
+
+@pytest.mark.parametrize("sloppiness, converged", [(500.0, True), (5000.0, False)])
+def test_a_rejected_answer_is_solved_for_once_more_at_a_tenth_of_the_tolerance(sloppiness, converged):
+    """A solver whose stopping test is looser than the promise (its contact impulses are
+    ``sloppiness·tolerance`` too large): the answer is rejected, asked for again at a tenth of
+    the tolerance, and kept if that keeps the promise at the tolerance asked for."""
+    from qpcontact.solvers import SolverOutput, SolverSpec, registry, solve_min_norm
+
+    calls = []
+
+    def sloppy(problem, formulation, form, *, tolerance, time_limit, settings, initial):
+        calls.append(tolerance)
+        lam = solve_min_norm(problem.matrix, problem.rhs).lam + sloppiness * tolerance
+        return SolverOutput(problem.matrix.T @ lam, lam, True, "done", 1, 0.0, 0.0)
+
+    registry.register(SolverSpec("sloppy", formulations=("complementarity",), forms=("contact",), warm_start=False,
+                                 time_limit=True, solve=sloppy))
+    try:
+        cells = qc.Cells([[0, 0.9, 0], [0, 0, 0]], [[1, 0, 0], [0, 0, 1]], 2.0, 0.5, momenta=[[0, -1.0, 0], [0, 0, 0]])
+        result = qc.resolve(cells, solver="sloppy", tolerance=1e-6, on_failure="return")
+    finally:
+        registry.unregister("sloppy")
+    assert calls == [1e-6, pytest.approx(1e-7)]
+    assert result.converged == converged
+    if converged:
+        assert result.status == "done (again at 1e-07)" and result.errors["complementarity"] <= 1e-4
+    else:
+        assert "complementarity residual" in result.message or "duality gap" in result.message
