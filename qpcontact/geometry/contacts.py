@@ -315,13 +315,13 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0) -> tup
     separation is below the true separation of the pair, and kind 0 is the true one. Selection:
 
     - an end kind is a candidate only when both segments have length > 0 and the end projects
-      into the other segment (unclamped, to rounding ``1e-9·(ρ_a + ρ_b)``);
+      into the other segment (unclamped, to rounding ``ROUNDING·(ρ_a + ρ_b)``, 1e-9);
     - a kind is kept when its separation is at most ``margin`` (touching counts);
     - kind 0 is dropped when a kept end has the same (to rounding) or a smaller separation: that
       end represents the minimum (exactly parallel rods thus keep two contacts, not three);
-    - an end is dropped when both its ``s`` and ``t`` lie within ``½(ρ_a + ρ_b)`` of a contact of
-      the same pair kept before it (the one with the smallest separation first): near-duplicate
-      rows make the Delassus operator singular;
+    - an end is dropped when both its ``s`` and ``t`` lie within ``DUPLICATE_DISTANCE·(ρ_a +
+      ρ_b)`` (¼) of a contact of the same pair kept before it (the one with the smallest
+      separation first): near-duplicate rows make the Delassus operator singular;
     - a pair within the margin left with nothing keeps kind 0.
 
     Rods lying side by side thus get the two ends of their overlap (they cannot turn through
