@@ -19,6 +19,12 @@ class InvalidCellsError(QPContactError, ValueError):
     or mass, zero or non-unit axis, negative length."""
 
 
+class TooManyContactsError(InvalidCellsError):
+    """The scene has more candidate contact pairs than
+    :data:`qpcontact.geometry.contacts.MAX_PAIRS_PER_CELL` per cell (coincident or deeply
+    interpenetrating cells, where the pairs grow like N²); raised before they are allocated."""
+
+
 class InvalidArgumentError(QPContactError, ValueError):
     """An argument other than the cells is out of range (tolerance, margin, time step, ...)."""
 

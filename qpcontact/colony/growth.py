@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import flag, number
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Plane, capsule_volume
 from .position import ContactImpulses, PositionSettings, PositionStepResult, position_step
@@ -74,6 +75,13 @@ class Colony:
             arr = getattr(self, name)
             if not np.all(np.isfinite(arr)) or np.any(arr < 0):
                 raise InvalidArgumentError(f"Colony.{name}: must be finite and >= 0")
+        growing = np.isfinite(self.cells.masses) & np.isfinite(self.cells.growth_inertia)
+        stuck = growing & (self.cells.lengths == 0) & (self.rates > 0)
+        if stuck.any():
+            i = int(np.flatnonzero(stuck)[0])
+            raise InvalidArgumentError(
+                f"Colony: cell {i} has length 0 and growth rate {self.rates[i]:g} > 0, but exponential elongation "
+                "l·e^(rt) of a zero length stays 0: give it a length > 0 (or rate 0)")
         if np.unique(self.ids).size != n:
             raise InvalidArgumentError("Colony.ids: must be unique")
         if self.next_id < 0:
@@ -134,6 +142,11 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         The new colony: each mother replaced by daughter 1 (in her place), daughter 2 appended;
         new ids, parent ids set. The colony itself when no cell divides.
     """
+    division_length = number("division_length", division_length, minimum=0.0, open_minimum=True)
+    axis_noise = number("axis_noise", axis_noise, minimum=0.0)
+    rate_noise = number("rate_noise", rate_noise, minimum=0.0)
+    base_rate = number("base_rate", base_rate, minimum=0.0, allow_none=True)
+    planar = flag("planar", planar)
     cells = colony.cells
     dividing = np.flatnonzero(cells.lengths >= division_length)
     if dividing.size == 0:
@@ -211,8 +224,14 @@ def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.n
     (whose ``cells`` are the colony's).
     """
     cells = colony.cells
-    increase, paid = growth_step(colony, dt)
-    g = growth_drive(cells, increase, dt)
+    dt = number("dt", dt, minimum=0.0, open_minimum=True)
+    with np.errstate(over="ignore", invalid="ignore"):
+        increase, paid = growth_step(colony, dt)
+        g = growth_drive(cells, increase, dt)
+    if not np.all(np.isfinite(g)):
+        i = int(np.flatnonzero(~np.isfinite(g))[0])
+        raise InvalidArgumentError(f"dt = {dt!r} is too large: cell {i} would grow beyond the range of numbers "
+                                   f"(rate {colony.rates[i]:g}); take a smaller time step")
     if dynamics == "overdamped":
         full = np.zeros((cells.n, 7)) if drive is None else np.array(drive, dtype=float, copy=True)
         full[:, 6] = g

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import flag, instance, number, real_array
 from ..errors import InvalidArgumentError, InvalidCellsError
 from ..geometry.cells import Cells
 from ..geometry.contacts import Contacts, concatenate, find_contacts, required_velocity_change
@@ -87,20 +88,27 @@ def advance(cells: Cells, dt: float) -> Cells:
 
     Raises:
         InvalidArgumentError: a length would become negative (the step is too large for how
-            fast contacts compress that cell).
+            fast contacts compress that cell), or a position, turn or length would not be a
+            finite number (a huge ``dt``).
     """
-    lengths = cells.lengths + cells.growth_rates * dt
+    with np.errstate(over="ignore", invalid="ignore"):
+        centers = cells.centers + cells.velocities * dt
+        turns = cells.angular_velocities * dt
+        lengths = cells.lengths + cells.growth_rates * dt
+    finite = np.isfinite(centers).all(axis=1) & np.isfinite(turns).all(axis=1) & np.isfinite(lengths)
+    if not finite.all():
+        i = int(np.flatnonzero(~finite)[0])
+        raise InvalidArgumentError(
+            f"dt = {dt!r} is too large: cell {i} would move, turn or grow beyond the range of numbers "
+            f"(speed {np.linalg.norm(cells.velocities[i]):.3g}, turning rate {np.linalg.norm(cells.angular_velocities[i]):.3g}, "
+            f"length rate {cells.growth_rates[i]:.3g}); take a smaller time step")
     negative = lengths < 0
     if negative.any():
         i = int(np.flatnonzero(negative)[0])
         raise InvalidArgumentError(
             f"dt = {dt!r} is too large: cell {i} would reach length {lengths[i]:.3g} < 0 "
             f"(length rate {cells.growth_rates[i]:.3g}); take a smaller time step")
-    return cells.replace(
-        centers=cells.centers + cells.velocities * dt,
-        axes=rotate(cells.axes, cells.angular_velocities * dt),
-        lengths=lengths,
-    )
+    return cells.replace(centers=centers, axes=rotate(cells.axes, turns), lengths=lengths)
 
 
 def overlap_fractions(cells: Cells, contacts: Contacts) -> np.ndarray:
@@ -142,7 +150,7 @@ def drop_fast_separating(contacts: Contacts, position_correction: float, dt: flo
 def momenta_before_contact(cells: Cells, dt: float, dynamics: str, drive: np.ndarray | None, damping: float) -> Cells:
     """Step 1 of the module docstring: the momenta the contact solve starts from."""
     if drive is not None:
-        drive = np.asarray(drive, dtype=float)
+        drive = real_array("drive", drive, InvalidArgumentError)
         if drive.shape != (cells.n, 7):
             raise InvalidArgumentError(f"drive: expected shape ({cells.n}, 7) (p, L, g per cell), got {drive.shape}")
     if dynamics == "overdamped":
@@ -205,12 +213,14 @@ def step(
         SolverFailedError: the contact solve failed; nothing was applied.
         InvalidArgumentError: bad arguments, or a length would become negative.
     """
-    if not (np.isfinite(dt) and dt > 0):
-        raise InvalidArgumentError(f"dt: must be finite and > 0, got {dt!r}")
+    instance("cells", cells, Cells, "qpcontact.Cells", InvalidCellsError)
+    dt = number("dt", dt, minimum=0.0, open_minimum=True)
     if dynamics not in DYNAMICS:
         raise InvalidArgumentError(f"dynamics: expected one of {DYNAMICS}, got {dynamics!r}")
-    if not (np.isfinite(damping) and damping >= 0):
-        raise InvalidArgumentError(f"damping: must be finite and >= 0, got {damping!r}")
+    damping = number("damping", damping, minimum=0.0)
+    planar = flag("planar", planar, allow_none=True)
+    keep_separating = flag("keep_separating", keep_separating, allow_none=True)
+    margin = number("margin", margin, minimum=0.0)
     if dynamics == "overdamped" and damping:
         raise InvalidArgumentError("damping applies to dynamics='inertial' only (overdamped momenta are reset each step)")
     if "contacts" in resolve_options:

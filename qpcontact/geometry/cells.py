@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ..checks import flag, real_array
 from ..errors import InvalidCellsError
 
 #: Largest deviation of ``|â|`` from 1 that is accepted (and then renormalized to the last bit).
@@ -28,11 +29,8 @@ PLANAR_TOLERANCE = 1e-12
 
 def _array(name: str, value: Any, n: int, tail: tuple[int, ...]) -> np.ndarray:
     """``value`` as a float array of shape ``(n, *tail)``; scalars (and ``tail`` vectors)
-    broadcast."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise InvalidCellsError(f"{name}: cannot be read as a float array ({exc})") from None
+    broadcast. Strings, complex values and ragged nesting are refused."""
+    arr = real_array(name, value, InvalidCellsError)
     shape = (n, *tail)
     if arr.shape == shape:
         return arr.copy()
@@ -108,7 +106,8 @@ class Cells:
                      normalize_axes: bool = False) -> None: ...
 
     def __post_init__(self, normalize_axes: bool) -> None:
-        centers = np.asarray(self.centers, dtype=float) if not isinstance(self.centers, np.ndarray) else self.centers
+        normalize_axes = flag("normalize_axes", normalize_axes, error=InvalidCellsError)
+        centers = real_array("centers", self.centers, InvalidCellsError)
         if centers.ndim != 2 or centers.shape[1] != 3:
             raise InvalidCellsError(f"centers: expected shape (N, 3), got {np.shape(centers)}")
         n = centers.shape[0]
@@ -134,8 +133,17 @@ class Cells:
         if negative.any():
             index = int(np.flatnonzero(negative)[0])
             raise InvalidCellsError(f"lengths: must be >= 0, got {arrays['lengths'][index]!r} at cell {index}")
-        norms = np.linalg.norm(arrays["axes"], axis=1)
-        zero = ~(norms > 0)
+        # |a| of axes like 1e200 overflows (and the axis became zero after the division), of axes
+        # like 1e-200 underflows: such axes are divided by their largest component first (only
+        # those: dividing a unit axis again would change its last bits).
+        largest = np.max(np.abs(arrays["axes"]), axis=1)
+        with np.errstate(over="ignore", under="ignore"):
+            norms = np.linalg.norm(arrays["axes"], axis=1)
+        extreme = (largest > 0) & ~((norms > 1e-150) & (norms < 1e150))
+        if extreme.any():
+            arrays["axes"][extreme] /= largest[extreme, None]
+            norms[extreme] = np.linalg.norm(arrays["axes"][extreme], axis=1) * largest[extreme]
+        zero = ~(largest > 0)
         if zero.any():
             raise InvalidCellsError(f"axes: zero axis at cell {int(np.flatnonzero(zero)[0])}")
         off = np.abs(norms - 1.0) > AXIS_UNIT_TOLERANCE
@@ -145,11 +153,25 @@ class Cells:
                 f"axes: not unit length at cell {index} (|a| = {norms[index]:.6g}); "
                 "pass normalize_axes=True to normalize them"
             )
+        norms[extreme] /= largest[extreme]
         arrays["axes"] /= norms[:, None]
         # Arrays are private copies (the caller's inputs are never aliased); they stay writeable
         # so that libraries needing writable buffers accept them.
         for name, arr in arrays.items():
             object.__setattr__(self, name, arr)
+        # Inverse masses and inertias must be numbers: radii of 1e-170 (ρ² underflows to 0) or
+        # masses of 1e-320 gave infinite inverse inertias and NaN velocities.
+        movable = np.isfinite(self.masses)
+        with np.errstate(divide="ignore", over="ignore", under="ignore", invalid="ignore"):
+            inverses = (("1/m", self.inverse_masses), ("1/I∥ = 2/(mρ²)", self.inverse_inertia_parallel),
+                        ("1/I⊥ = 12/(m(3ρ² + l²))", self.inverse_inertia_perpendicular))
+        for what, inverse in inverses:
+            bad = movable & ~(np.isfinite(inverse) & (inverse > 0))
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise InvalidCellsError(f"masses, radii, lengths: {what} is not a finite positive number at cell {i} "
+                                        f"(m = {self.masses[i]!r}, ρ = {self.radii[i]!r}, l = {self.lengths[i]!r}); "
+                                        "rescale the units")
 
     # ----------------------------------------------------------------------------------------
     @property

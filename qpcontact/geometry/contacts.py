@@ -30,7 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..errors import InvalidArgumentError
+from ..checks import flag, instance, number
+from ..errors import InvalidArgumentError, InvalidCellsError, TooManyContactsError
 from .cells import Cells, perpendicular_basis
 
 #: Contact kinds (:attr:`Contacts.kind`). Between two cells: the closest points of the axis
@@ -40,6 +41,12 @@ from .cells import Cells, perpendicular_basis
 CLOSEST, A_MINUS_END, A_PLUS_END, B_MINUS_END, B_PLUS_END, PLANE_MINUS_END, PLANE_PLUS_END = range(7)
 #: Number of kinds a pair of cells can have (0–4).
 PAIR_KINDS = 5
+#: The broad phase raises :class:`~qpcontact.errors.TooManyContactsError` when there are more
+#: candidate pairs than this per cell on average, before allocating them. A dense 3D colony has
+#: 11; N coincident cells have (N − 1)/2, so 130 or more of them alone are refused. Module
+#: attribute, read at each call: set ``qpcontact.geometry.contacts.MAX_PAIRS_PER_CELL`` to allow
+#: more.
+MAX_PAIRS_PER_CELL = 64
 #: Separations (and end projections) that differ by less than this times ``ρ_a + ρ_b`` count as
 #: equal: rounding.
 ROUNDING = 1e-9
@@ -99,6 +106,25 @@ class Contacts:
         return cls(zi, zi.copy(), z3, z3, z3, z1, z1, z1, z1, zi.copy())
 
 
+def check_contacts(contacts: object, cells: Cells) -> Contacts:
+    """``contacts`` if it is a :class:`Contacts` of these cells: one length for every field, and
+    cell indices in range (``cell_b = -1`` for a static body); else
+    :class:`~qpcontact.errors.InvalidArgumentError` (e.g. contacts of another scene)."""
+    instance("contacts", contacts, Contacts, "qpcontact.Contacts (e.g. from find_contacts)")
+    assert isinstance(contacts, Contacts)
+    k = len(contacts)
+    for f in dataclasses.fields(Contacts):
+        value = getattr(contacts, f.name)
+        if not isinstance(value, np.ndarray) or value.shape[:1] != (k,):
+            raise InvalidArgumentError(f"contacts.{f.name}: expected an array of {k} rows, got "
+                                       f"{getattr(value, 'shape', type(value).__name__)}")
+    for name, values, low in (("cell_a", contacts.cell_a, 0), ("cell_b", contacts.cell_b, -1)):
+        if k and (values.dtype.kind not in "iu" or values.min() < low or values.max() >= cells.n):
+            raise InvalidArgumentError(f"contacts.{name}: indices {values.min()}..{values.max()} are not cells of "
+                                       f"these {cells.n} cells (contacts of another scene?)")
+    return contacts
+
+
 def concatenate(parts: list[Contacts]) -> Contacts:
     """One Contacts holding all of ``parts`` in order (e.g. cell–cell and cell–plane)."""
     if not parts:
@@ -153,7 +179,9 @@ def candidate_pairs(cells: Cells, margin: float = 0.0) -> np.ndarray:
     points = cells.centers[owner] + s[:, None] * cells.axes[owner]
     bound = 0.5 * piece_len + radii[owner]
     tree = cKDTree(points)
-    pairs = tree.query_pairs(r=2.0 * float(bound.max()) + margin, output_type="ndarray")
+    reach = 2.0 * float(bound.max()) + margin
+    _check_pair_count(tree, points, reach, cells.n, margin)
+    pairs = tree.query_pairs(r=reach, output_type="ndarray")
     if pairs.size == 0:
         return np.zeros((0, 2), dtype=np.intp)
     gap = np.linalg.norm(points[pairs[:, 0]] - points[pairs[:, 1]], axis=1)
@@ -167,8 +195,46 @@ def candidate_pairs(cells: Cells, margin: float = 0.0) -> np.ndarray:
     first[1:] = key[1:] != key[:-1]
     key = key[first]
     cp = np.column_stack([key // n, key % n]).astype(np.intp)
+    if cp.shape[0] > MAX_PAIRS_PER_CELL * n:
+        _too_many(f"{cp.shape[0]:,} candidate pairs of {n:,} cells", "cell", margin)
     both_fixed = np.isinf(cells.masses[cp[:, 0]]) & np.isinf(cells.masses[cp[:, 1]])
     return cp[~both_fixed]
+
+
+def _too_many(what: str, unit: str, margin: float) -> None:
+    raise TooManyContactsError(
+        f"{what}: more than MAX_PAIRS_PER_CELL = {MAX_PAIRS_PER_CELL} per {unit} (margin {margin:g}); coincident "
+        "or deeply interpenetrating cells? (set qpcontact.geometry.contacts.MAX_PAIRS_PER_CELL to allow more)")
+
+
+def _check_pair_count(tree: cKDTree, points: np.ndarray, reach: float, n: int, margin: float) -> None:
+    """Raise before ``query_pairs`` allocates more sphere pairs than :data:`MAX_PAIRS_PER_CELL`
+    per cell allows (a pair of cells of k spheres each can give k² sphere pairs: the limit is
+    ``MAX_PAIRS_PER_CELL · n · (m/n)²`` for m spheres). A cheap upper bound first (points in the
+    same or adjacent cells of a grid of spacing ``reach``: 0.1 s at 10⁵ cells); only where that
+    exceeds the limit are the pairs counted exactly (``count_neighbors``, no allocation; fast
+    exactly where the points are clustered)."""
+    m = points.shape[0]
+    limit = MAX_PAIRS_PER_CELL * m * m // max(n, 1)
+    if m * (m - 1) // 2 <= limit:
+        return
+    index = np.floor((points - points.min(axis=0)) / max(reach, 1e-300)).astype(np.int64) + 1
+    dims = index.max(axis=0) + 2
+    key = (index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2]
+    occupied, counts = np.unique(key, return_counts=True)
+    around = np.zeros(occupied.size, dtype=np.int64)
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dz in (-1, 0, 1):
+                other = occupied + (dx * dims[1] + dy) * dims[2] + dz
+                at = np.minimum(np.searchsorted(occupied, other), occupied.size - 1)
+                around += np.where(occupied[at] == other, counts[at], 0)
+    if (int(counts @ around) - m) // 2 <= limit:
+        return
+    pairs = (int(tree.count_neighbors(tree, reach)) - m) // 2
+    if pairs > limit:
+        _too_many(f"{pairs:,} candidate pairs of {m:,} bounding spheres ({m / n:.3g} per cell) of {n:,} cells",
+                  "cell", margin)
 
 
 # ------------------------------------------------------------------------------------------
@@ -250,13 +316,13 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *,
     separation is below the true separation of the pair, and kind 0 is the true one. Selection:
 
     - an end kind is a candidate only when both segments have length > 0 and the end projects
-      into the other segment (unclamped, to rounding ``1e-9·(ρ_a + ρ_b)``);
+      into the other segment (unclamped, to rounding ``ROUNDING·(ρ_a + ρ_b)``, 1e-9);
     - a kind is kept when its separation is at most ``margin`` (touching counts);
     - kind 0 is dropped when a kept end has the same (to rounding) or a smaller separation: that
       end represents the minimum (exactly parallel rods thus keep two contacts, not three);
-    - an end is dropped when both its ``s`` and ``t`` lie within ``½(ρ_a + ρ_b)`` of a contact of
-      the same pair kept before it (the one with the smallest separation first): near-duplicate
-      rows make the Delassus operator singular;
+    - an end is dropped when both its ``s`` and ``t`` lie within ``DUPLICATE_DISTANCE·(ρ_a +
+      ρ_b)`` (¼) of a contact of the same pair kept before it (the one with the smallest
+      separation first): near-duplicate rows make the Delassus operator singular;
     - a pair within the margin left with nothing keeps kind 0.
 
     Rods lying side by side thus get the two ends of their overlap (they cannot turn through
@@ -400,10 +466,10 @@ def find_contacts(cells: Cells, margin: float = 0.0, *, planar: bool | None = Fa
             None: detected from the cells (:meth:`Cells.is_monolayer`), as
             :func:`qpcontact.resolve` and :func:`qpcontact.step` do with ``planar=None``.
     """
-    margin = float(margin)
-    if not np.isfinite(margin) or margin < 0:
-        raise InvalidArgumentError(f"margin: must be finite and >= 0, got {margin!r}")
-    planar = cells.is_monolayer() if planar is None else bool(planar)
+    instance("cells", cells, Cells, "qpcontact.Cells", InvalidCellsError)
+    margin = number("margin", margin, minimum=0.0)
+    planar = flag("planar", planar, allow_none=True)
+    planar = cells.is_monolayer() if planar is None else planar
     return narrow_phase(cells, candidate_pairs(cells, margin), margin, planar=planar)
 
 
@@ -412,12 +478,13 @@ def required_velocity_change(
 ) -> np.ndarray:
     """(K,) ``b = −u + β·max(0, −d)/Δt`` [length/time]: the increase of normal velocity that
     stops approach (β = 0) or also clears a fraction β of the overlap within the step."""
+    instance("contacts", contacts, Contacts, "qpcontact.Contacts")
     b = -contacts.normal_velocity
+    position_correction = number("position_correction", position_correction, minimum=0.0, maximum=1.0)
     if position_correction:
-        if dt is None or not dt > 0 or not np.isfinite(dt):
-            raise InvalidArgumentError(f"dt: position correction needs a finite time step > 0, got {dt!r}")
-        if not 0 < position_correction <= 1:
-            raise InvalidArgumentError(f"position_correction: must be in (0, 1], got {position_correction!r}")
+        if dt is None:
+            raise InvalidArgumentError("dt: position correction needs the time step")
+        dt = number("dt", dt, minimum=0.0, open_minimum=True)
         b = b + position_correction * np.maximum(0.0, -contacts.separation) / dt
     return b
 
@@ -436,6 +503,7 @@ def colliding(
     impulses at colliding contacts can drive a separating neighbour into approach, which only
     its own constraint ``(Mx)_k >= b_k`` prevents (for the complementarity formulation).
     """
+    keep_separating = flag("keep_separating", keep_separating)
     b = required_velocity_change(contacts, position_correction=position_correction, dt=dt)
     mask = b > 0
     if keep_separating and mask.any():

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..checks import number, sequence_of
 from ..errors import InvalidArgumentError
 from .cells import Cells
 from .contacts import PLANE_MINUS_END, PLANE_PLUS_END, Contacts, concatenate, relative_normal_velocity
@@ -69,11 +70,11 @@ def plane_contacts(cells: Cells, planes: Sequence[Plane], margin: float = 0.0) -
     (``masses = inf``) get none: nothing could move at such a contact (as
     :func:`~qpcontact.geometry.contacts.candidate_pairs` leaves out pairs of fixed cells).
     """
+    planes = sequence_of("planes", planes, Plane, "qpcontact.Plane objects (e.g. [qpcontact.substrate()])")
+    margin = number("margin", margin, minimum=0.0)
     parts = []
     movable = np.isfinite(cells.masses)
     for plane in planes:
-        if not isinstance(plane, Plane):
-            raise InvalidArgumentError(f"planes: expected qpcontact.geometry.Plane objects, got {type(plane).__name__}")
         normal, point = np.asarray(plane.normal), np.asarray(plane.point)
         for side, kind in ((-0.5, PLANE_MINUS_END), (0.5, PLANE_PLUS_END)):
             separation = (cells.centers + side * cells.lengths[:, None] * cells.axes - point) @ normal - cells.radii

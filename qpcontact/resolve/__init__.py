@@ -13,10 +13,11 @@ function (re-exported at the top level); import the modules with
 """
 
 from . import metrics
-from .resolve import ACCEPT_FACTOR, Result, acceptance_failure, resolve, solve_system
+from .resolve import ACCEPT_CAP, ACCEPT_FACTOR, Result, acceptance_failure, acceptance_limit, resolve, solve_system
 from .validation import ACTIVE_THRESHOLD, Agreement, active_set_polish, compare_with_linear, reference_solution
 
 __all__ = [
-    "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Result", "acceptance_failure", "active_set_polish",
+    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Result", "acceptance_failure", "acceptance_limit",
+    "active_set_polish",
     "compare_with_linear", "metrics", "reference_solution", "resolve", "solve_system",
 ]

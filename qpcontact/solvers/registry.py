@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 import scipy.sparse as sp
 
+from ..checks import mapping, number
 from ..errors import InvalidArgumentError, SolverNotInstalledError, UnknownSolverError
 from . import blocks
 
@@ -176,14 +177,14 @@ class IterativeSolution:
 
 
 def check_options(tolerance: float, max_iterations: int | None = None, time_limit: float | None = None) -> None:
-    """Raise :class:`~qpcontact.errors.InvalidArgumentError` for a tolerance outside (0, 1),
-    an iteration cap below 1 or a time limit that is not positive."""
-    if not (np.isfinite(tolerance) and 0 < tolerance < 1):
-        raise InvalidArgumentError(f"tolerance: must be in (0, 1), got {tolerance!r}")
-    if max_iterations is not None and max_iterations < 1:
-        raise InvalidArgumentError(f"max_iterations: must be >= 1, got {max_iterations!r}")
-    if time_limit is not None and not time_limit > 0:
-        raise InvalidArgumentError(f"time_limit: must be > 0 seconds, got {time_limit!r}")
+    """Raise :class:`~qpcontact.errors.InvalidArgumentError` for a tolerance that is not a number
+    in (0, 1), an iteration cap that is not an integer >= 1 or a time limit that is not a
+    positive number of seconds."""
+    number("tolerance", tolerance, minimum=0.0, maximum=1.0, open_minimum=True, open_maximum=True)
+    if max_iterations is not None and not (isinstance(max_iterations, (int, np.integer))
+                                           and not isinstance(max_iterations, bool) and max_iterations >= 1):
+        raise InvalidArgumentError(f"max_iterations: expected an integer >= 1, got {max_iterations!r}")
+    number("time_limit", time_limit, minimum=0.0, open_minimum=True, allow_none=True)
 
 
 class SolveFunction(Protocol):
@@ -338,7 +339,7 @@ def get_solver(name: str) -> SolverSpec:
         UnknownSolverError: no solver of that name is registered.
         SolverNotInstalledError: it is registered but cannot run here.
     """
-    spec = _SOLVERS.get(name)
+    spec = _SOLVERS.get(name) if isinstance(name, str) else None
     if spec is None:
         raise UnknownSolverError(f"unknown solver {name!r}; installed: {available_solvers()}")
     if not spec.available():
@@ -369,7 +370,7 @@ def solve(
     spec = get_solver(solver)
     formulation, form = spec.plan(formulation, form)
     check_options(tolerance, None, time_limit)
-    settings = dict(settings or {})
+    settings = mapping("solver_settings", settings)
     spec.check_settings(settings)
     if initial is not None and not spec.warm_start:
         raise InvalidArgumentError(f"initial: solver {solver!r} takes no initial guess")

@@ -58,7 +58,15 @@ def test_kinetic_energy_matches_the_sum_of_parts():
         (dict(axes=[[0, 0, 0], [1, 0, 0]]), "axes: zero axis at cell 0"),
         (dict(axes=[[2, 0, 0], [1, 0, 0]]), "axes: not unit length at cell 0"),
         (dict(momenta=[[np.nan, 0, 0], [0, 0, 0]]), "momenta: NaN or inf"),
-        (dict(masses="heavy"), "masses: cannot be read"),
+        (dict(masses="heavy"), "masses: expected numbers"),
+        # issue 13, item 9
+        (dict(centers=[[0, 0, 0], [1, 2]]), "centers: cannot be read as an array of numbers"),
+        (dict(centers="origin"), "centers: expected numbers"),
+        (dict(centers=[["0", "0", "0"], ["1", "0", "0"]]), "centers: expected numbers"),
+        (dict(momenta=[[1 + 1j, 0, 0], [0, 0, 0]]), "momenta: complex values are not accepted"),
+        (dict(radii=1e-170, angular_momenta=[0, 0, 1.0]), r"1/I∥ = 2/\(mρ²\) is not a finite positive number at cell 0"),
+        (dict(masses=1e-320), "1/m is not a finite positive number"),
+        (dict(normalize_axes="no"), "normalize_axes: expected True or False"),
     ],
 )
 def test_bad_inputs_raise_clear_errors(kw, match):
@@ -79,3 +87,9 @@ def test_with_impulses_checks_shape_and_adds():
         cells.with_impulses(np.zeros((2, 6)))
     out = cells.with_impulses(np.arange(14.0).reshape(2, 7))
     assert np.allclose(out.momenta[1], [7, 8, 9]) and np.allclose(out.growth_momenta, [6, 13])
+
+
+def test_normalizing_huge_and_tiny_axes_keeps_their_direction():
+    """Issue 13, item 9: |a| of an axis of 1e200 overflowed, and the axis became zero."""
+    cells = make(axes=[[1e200, 1e200, 0], [0, 3e-200, 4e-200]], normalize_axes=True)
+    np.testing.assert_allclose(cells.axes, [[2**-0.5, 2**-0.5, 0], [0, 0.6, 0.8]], rtol=1e-15)

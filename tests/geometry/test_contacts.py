@@ -203,3 +203,31 @@ def test_narrow_phase_order_does_not_depend_on_the_pair_order():
     # by pair, then along a (two contacts of parallel neighbours in increasing s)
     key = a.cell_a.astype(np.int64) * cells.n + a.cell_b
     assert np.all(np.diff(key) >= 0)
+
+
+# ------------------------------------------------------------------------------------------
+# Coincident cells (issue 13, item 7): a named error before anything large is allocated
+# ------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [300, 100_000])
+def test_coincident_cells_are_refused_before_their_pairs_are_allocated(n):
+    """N cells at one point have N²/2 pairs: 300 made Clarabel allocate 7.2 GB and abort, 10⁵ a
+    raw MemoryError in the broad phase."""
+    cells = qc.Cells(np.zeros((n, 3)), [1.0, 0.0, 0.0], 2.0, 0.5, momenta=[1.0, 0.0, 0.0])
+    with pytest.raises(qc.TooManyContactsError, match=f"{n:,} cells.*MAX_PAIRS_PER_CELL = 64") as error:
+        qc.resolve(cells)
+    assert isinstance(error.value, qc.InvalidCellsError)
+    with pytest.raises(qc.TooManyContactsError):
+        qc.step(cells, 0.01)
+
+
+def test_the_pair_limit_can_be_raised_and_dense_colonies_stay_below_it(monkeypatch):
+    from qpcontact.geometry import contacts
+
+    cells = qc.Cells(np.zeros((150, 3)), [1.0, 0.0, 0.0], 2.0, 0.5)
+    with pytest.raises(qc.TooManyContactsError):
+        candidate_pairs(cells)
+    monkeypatch.setattr(contacts, "MAX_PAIRS_PER_CELL", 100)
+    assert len(candidate_pairs(cells)) == 150 * 149 // 2
+    monkeypatch.undo()
+    dense = scenes.colony_3d(3000, seed=1)
+    assert len(candidate_pairs(dense, margin=0.3)) < 20 * dense.n

@@ -57,14 +57,19 @@ def axis_points(cells, contacts):
     return q_a, q_b
 
 
+def random_frame(rng):
+    """A random unit vector and a random unit vector perpendicular to it."""
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    perpendicular = np.cross(axis, rng.normal(size=3))
+    return axis, perpendicular / np.linalg.norm(perpendicular)
+
+
 def random_pair(rng, case):
     """Two capsules in one of the hard configurations."""
     length_a, length_b = rng.choice([0.0, 0.3, 2.0, 5.0, 40.0], 2)
     radius_a, radius_b = rng.uniform(0.05, 0.8, 2)
-    a_axis = rng.normal(size=3)
-    a_axis /= np.linalg.norm(a_axis)
-    helper = np.cross(a_axis, rng.normal(size=3))
-    helper /= np.linalg.norm(helper)
+    a_axis, helper = random_frame(rng)
     angle = {"near_parallel": 10.0 ** rng.uniform(-12, -2), "skew": rng.uniform(0.01, 0.5),
              "random": rng.uniform(0, np.pi), "parallel": 0.0, "crossing": rng.uniform(0.05, np.pi / 2)}[case]
     b_axis = np.cos(angle) * a_axis + np.sin(angle) * helper
@@ -208,10 +213,7 @@ def test_a_skew_pair_in_3d_gets_the_crossing_point():
 @pytest.mark.parametrize("seed", range(6))
 def test_parallel_rods_side_by_side_get_exactly_the_two_ends_of_their_overlap(seed):
     rng = np.random.default_rng(seed)
-    axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
-    side = np.cross(axis, rng.normal(size=3))
-    side /= np.linalg.norm(side)
+    axis, side = random_frame(rng)
     length_a, length_b = rng.uniform(1.0, 6.0, 2)
     shift = rng.uniform(-0.4, 0.4) * (length_a + length_b)
     origin = rng.uniform(-100, 100, 3)

@@ -140,8 +140,9 @@ def test_jammed_packing_without_position_correction_is_still_consistent():
 def test_jammed_packing_with_position_correction_separates_least_squares_from_linear():
     cells = jammed_packing()
     kw = dict(position_correction=0.5, dt=0.01)
-    linear = qc.resolve(cells, solver="linear", **kw)
-    assert linear.errors["penetration"] > 1e-4  # inconsistent: the least-squares answer penetrates
+    linear = qc.resolve(cells, solver="linear", on_failure="return", **kw)
+    # inconsistent: the least-squares answer penetrates, and is refused (issue 13, item 6)
+    assert linear.errors["penetration"] > 1e-4 and not linear.converged and "no solution" in linear.message
     for solver in ("clarabel", "osqp"):
         ls = qc.resolve(cells, solver=solver, formulation="least_squares", tolerance=1e-8, **kw)
         assert ls.errors["penetration"] < 1e-5
