@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import flag, number
+from ..checks import flag, number, real_array
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Plane, capsule_volume
 from .position import ContactImpulses, PositionSettings, PositionStepResult, position_step
@@ -142,7 +142,13 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         The new colony: each mother replaced by daughter 1 (in her place), daughter 2 appended;
         new ids, parent ids set. The colony itself when no cell divides.
     """
-    division_length = number("division_length", division_length, minimum=0.0, open_minimum=True)
+    if np.ndim(division_length) == 0:
+        division_length = number("division_length", division_length, minimum=0.0, open_minimum=True)
+    else:
+        division_length = real_array("division_length", division_length, InvalidArgumentError)
+        if division_length.shape != (colony.cells.n,) or not np.all(np.isfinite(division_length) & (division_length > 0)):
+            raise InvalidArgumentError(f"division_length: expected a number > 0 or {colony.cells.n} finite numbers > 0 "
+                                       f"(one per cell), got shape {division_length.shape}")
     axis_noise = number("axis_noise", axis_noise, minimum=0.0)
     rate_noise = number("rate_noise", rate_noise, minimum=0.0)
     base_rate = number("base_rate", base_rate, minimum=0.0, allow_none=True)
