@@ -24,6 +24,7 @@ COMMANDS = {
     "compare": ("qpcontact.studies.compare", "solver comparison: error against run time on colony scenes"),
     "stability": ("qpcontact.studies.stability", "run every solver on the catalogue of stiff and extreme cases"),
     "bench": ("qpcontact.studies.bench", "time each phase of a step at colony scale"),
+    "sweep": ("qpcontact.studies.sweep", "replicates and parameter sweeps of colony runs, as tasks on Dask"),
 }
 
 
