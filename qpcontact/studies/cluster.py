@@ -95,8 +95,9 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         with client:
             yield client
         return
-    # Worker processes that may start children (the guarded cases; see call()).
-    with dask.config.set({"distributed.worker.daemon": False}):
+    # Worker processes that may start children (the guarded cases; see call()); the scheduler's
+    # HTTP server (started without the dashboard too) on a free port, not on 8787.
+    with dask.config.set({"distributed.worker.daemon": False, "distributed.scheduler.dashboard.address": ":0"}):
         cluster = distributed.LocalCluster(n_workers=workers or max(1, os.cpu_count() or 1), threads_per_worker=1,
                                            processes=True, dashboard_address=None)
     with cluster, distributed.Client(cluster) as client:

@@ -39,6 +39,7 @@ did not finish, 130 after Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import itertools
 import json
 import os
@@ -47,7 +48,7 @@ import socket
 import sys
 import time
 import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -56,7 +57,8 @@ from typing import Any
 import numpy as np
 
 from ..arguments import comma_list, non_negative_int, positive_int, run_standalone
-from ..colony.hooks import load_hook
+from ..colony.growth import Colony
+from ..colony.hooks import Hook, load_hook
 from ..colony.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
 from ..colony.simulate import (
     RUN_OPTION_NAMES,
@@ -81,6 +83,11 @@ ENSEMBLE_FILE = "ensemble.png"
 #: In each run's folder: its measures once it is finished; one line per start of its task.
 RESULT_FILE = "result.json"
 ATTEMPTS_FILE = "attempts.jsonl"
+LOCK_FILE = ".run.lock"
+#: In the sweep's folder while it stops: every run stops cleanly at its next step (state saved).
+STOP_FILE = ".stop"
+#: Seconds a stopping sweep waits for its running runs to save their state.
+STOP_WAIT = 30.0
 #: Every file a sweep writes in its folder (glob patterns).
 OUTPUTS = (SWEEP_FILE, SUMMARY_FILE, ENSEMBLE_FILE,
            *(f"runs/*/{pattern}" for pattern in (*RUN_OUTPUTS, *LEFTOVERS, RESULT_FILE, ATTEMPTS_FILE)))
@@ -329,11 +336,50 @@ def open_folder(path: Path) -> tuple[RunFolder, Any]:
     return RunFolder.create(path, overwrite=True), None
 
 
+@contextlib.contextmanager
+def run_lock(folder: Path) -> Iterator[None]:
+    """Hold the run folder's lock (``.run.lock``; released when the process ends, killed or not),
+    so that two tasks of one run never write its folder at once: Dask may start a task again
+    while the first is still running (a cancelled task on an existing cluster runs to its end).
+    No lock where :mod:`fcntl` is missing (Windows)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    with open(folder / LOCK_FILE, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
 def run_task(name: str, values: Mapping[str, Any], folder: str, snapshot_every: int) -> dict[str, Any]:
-    """One run of a sweep, in its folder: idempotent (module docstring). Returns its outcome:
-    ``name``, ``status`` (``done`` or ``failed``), ``error``, ``traceback`` and the
-    :data:`MEASURES`; it raises only what the folder's files raise."""
-    path = Path(folder)
+    """One run of a sweep, in its folder: idempotent (module docstring), one task at a time per
+    run (:func:`run_lock`). Returns its outcome: ``name``, ``status`` (``done`` or ``failed``),
+    ``error``, ``traceback`` and the :data:`MEASURES`; it raises only what the folder's files
+    raise."""
+    with run_lock(Path(folder)):
+        return _run(name, values, Path(folder), snapshot_every)
+
+
+def stoppable(hook: Hook | None, flag: Path) -> Hook:
+    """The run's model hook (or none), preceded by a look at the sweep's stop flag: once it
+    exists the run stops cleanly before its next step (``KeyboardInterrupt`` in a step is
+    :func:`~qpcontact.colony.run_colony`'s clean stop: nothing of the step applied, the state
+    saved), whatever thread or process the run is in."""
+
+    def checked(colony: Colony, step: int) -> Any:
+        if flag.exists():
+            raise KeyboardInterrupt
+        return None if hook is None else hook(colony, step)
+
+    return checked
+
+
+def _run(name: str, values: Mapping[str, Any], path: Path, snapshot_every: int) -> dict[str, Any]:
     finished = read_json(path / RESULT_FILE)
     if isinstance(finished, dict) and finished.get("status") == "done":
         return finished
@@ -352,7 +398,12 @@ def run_task(name: str, values: Mapping[str, Any], folder: str, snapshot_every: 
                             + (f"\ncontinued from step {start_step}" if snapshot is not None else ""))
     outcome: dict[str, Any] = {"name": name, "status": "failed", "error": "", "traceback": ""}
     try:
-        run = run_colony(settings, start=snapshot, progress=False, folder=run_folder, snapshot_every=snapshot_every)
+        hook = stoppable(load_hook(settings.model) if settings.model else None, path.parent.parent / STOP_FILE)
+        run = run_colony(settings, start=snapshot, progress=False, folder=run_folder, snapshot_every=snapshot_every,
+                         hook=hook)
+        if run.interrupted:
+            _event(name, "finished")
+            return {**outcome, "status": "stopped", "error": f"stopped at step {run.steps}"}
         draw_pictures(run_folder, settings, run, gif=False)
         measures = run_measures(run_folder.read_history(), run.colony.cells.axes, run.colony.cells.n, run.colony.time,
                                 settings.dimensions)
@@ -417,13 +468,16 @@ class Sweep:
         return write_text(self.out / SWEEP_FILE, json.dumps(self.document, indent=1, default=float) + "\n")
 
     def to_do(self) -> list[dict[str, Any]]:
-        """The runs not done (a run marked done whose result is missing is not done)."""
+        """The runs not done. A run is done when its folder's ``result.json`` says so (the task's
+        own record: a run that finished while the sweep was stopping is done, one marked done
+        whose result is missing is not)."""
         out = []
         for run in self.runs:
             result = read_json(self.folder(run) / RESULT_FILE)
-            if run["status"] == "done" and isinstance(result, dict) and result.get("status") == "done":
-                continue
-            out.append(run)
+            if isinstance(result, dict) and result.get("status") == "done":
+                self.record(run, result)
+            else:
+                out.append(run)
         return out
 
     def record(self, run: dict[str, Any], outcome: Mapping[str, Any]) -> None:
@@ -527,22 +581,31 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
     for run in runs:  # a run being redone is pending until it finishes again
         run.update(status="pending", error="")
     shown: dict[str, int] = {}
+
+    def collect() -> bool:
+        """Record the runs finished since the last call; whether there were any."""
+        finished = [future for future in pending if future.done()]
+        for future in finished:
+            run = pending.pop(future)
+            running.discard(run["name"])
+            if future.status == "finished" and future.result()["status"] == "stopped":
+                run.update(status="pending", error=future.result()["error"])
+                continue
+            if future.status == "finished":
+                sweep.record(run, future.result())
+            elif future.status == "error":
+                exc = future.exception()
+                sweep.record(run, {"status": "failed", "error": f"{type(exc).__name__}: {exc}"})
+            else:  # cancelled: the scheduler lost it
+                run.update(status="pending", error=f"task {future.status} (the scheduler lost it); resume the sweep")
+                continue
+            sweep.save()
+            bar.update()
+        return bool(finished)
+
     try:
         while pending:
-            finished = [future for future in pending if future.done()]
-            for future in finished:
-                run = pending.pop(future)
-                running.discard(run["name"])
-                if future.status == "finished":
-                    sweep.record(run, future.result())
-                elif future.status == "error":
-                    exc = future.exception()
-                    sweep.record(run, {"status": "failed", "error": f"{type(exc).__name__}: {exc}"})
-                else:  # cancelled: the scheduler lost it
-                    run.update(status="pending", error=f"task {future.status} (the scheduler lost it); resume the sweep")
-                    continue
-                sweep.save()
-                bar.update()
+            finished = collect()
             counts = sweep.counts()
             postfix = {"done": counts["done"], "running": len(running & {r["name"] for r in pending.values()}),
                        "failed": counts["failed"]}
@@ -552,13 +615,33 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
             if not finished:
                 time.sleep(0.2)
     except KeyboardInterrupt:
-        client.cancel(list(pending))
+        stop(sweep, client, pending, collect, running)
         return False
     finally:
         bar.close()
         with_unsubscribe(client)
         sweep.save()
     return True
+
+
+def stop(sweep: Sweep, client: Any, pending: dict[Any, Any], collect: Callable[[], bool], running: set[str]) -> None:
+    """Stop a sweep: the runs not started are cancelled; the running ones see the stop flag and
+    save their state at their next step (waited for up to :data:`STOP_WAIT` seconds; a second
+    Ctrl-C does not wait)."""
+    flag = sweep.out / STOP_FILE
+    flag.touch()
+    try:
+        waiting = [future for future, run in pending.items() if run["name"] not in running]
+        client.cancel(waiting)
+        for future in waiting:  # not started: they stay pending
+            pending.pop(future)
+        deadline = time.monotonic() + STOP_WAIT
+        while pending and time.monotonic() < deadline:
+            collect()
+            time.sleep(0.1)
+    finally:
+        client.cancel(list(pending))
+        flag.unlink(missing_ok=True)
 
 
 def with_unsubscribe(client: Any) -> None:
@@ -625,7 +708,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _grid_flags(args: argparse.Namespace) -> list[str]:
-    given = [f"--{name.replace('_', '-')}" for name in flags_given(args, Settings())]
+    flag_of = {field: flag for flag, field, *_ in SETTING_FLAGS}
+    given = [flag_of.get(name, name) for name in flags_given(args, Settings())]
     for flag, value in (("--config", args.config), ("--seeds", args.seeds), ("--replicates", args.replicates),
                         ("--vary", args.vary), ("--zip", args.zip), ("--snapshot-every", args.snapshot_every),
                         ("--overwrite", args.overwrite)):
@@ -646,6 +730,7 @@ def prepare(args: argparse.Namespace) -> tuple[Sweep, list[dict[str, Any]]]:
                                        f"{', '.join(given)}")
         sweep = Sweep.load(out)
         prepare_folder(out)
+        (out / STOP_FILE).unlink(missing_ok=True)  # left by a sweep that could not remove it
         return sweep, sweep.to_do()
     base, options, grid = configure(args)
     runs = plan_runs(base, grid)
@@ -655,6 +740,7 @@ def prepare(args: argparse.Namespace) -> tuple[Sweep, list[dict[str, Any]]]:
         raise OutputFolderError(f"{args.out} holds a sweep ({SWEEP_FILE}); continue it with --resume, or pass "
                                 "--overwrite to replace it")
     prepare_folder(out, OUTPUTS, overwrite=args.overwrite)
+    (out / STOP_FILE).unlink(missing_ok=True)
     sweep = Sweep.new(out, runs, base, grid, options.snapshot_every)
     sweep.save()
     return sweep, list(sweep.runs)
@@ -669,6 +755,7 @@ def run_command(args: argparse.Namespace) -> int:
         with cluster.open_client(args.scheduler, args.workers or min(len(runs), os.cpu_count() or 1)) as client:
             cluster.check_workers_can_write(client, sweep.out)
             completed = execute(sweep, client, runs, progress=not args.quiet)
+    sweep.to_do()  # runs that finished while the sweep stopped, or whose answer was lost, are done
     written = [sweep.save(), sweep.write_summary()]
     ensemble = sweep.write_ensemble()
     if ensemble is not None:
