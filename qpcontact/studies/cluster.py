@@ -35,6 +35,8 @@ from ..errors import InvalidArgumentError
 INSTALL_HINT = "pip install 'qpcontact[sweep]'"
 #: Seconds to wait for an existing scheduler to answer.
 CONNECT_TIMEOUT = 20.0
+#: LocalCluster options: no dashboard, the scheduler's HTTP server on a free port.
+NO_DASHBOARD = {"scheduler_kwargs": {"dashboard": False, "dashboard_address": ":0"}}
 
 
 def require_distributed() -> Any:
@@ -95,11 +97,11 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         with client:
             yield client
         return
-    # Worker processes that may start children (the guarded cases; see call()); the scheduler's
-    # HTTP server (started without the dashboard too) on a free port, not on 8787.
-    with dask.config.set({"distributed.worker.daemon": False, "distributed.scheduler.dashboard.address": ":0"}):
+    # Worker processes that may start children (the guarded cases; see call()); no dashboard, and
+    # the scheduler's HTTP server (health checks) on a free port, not on 8787.
+    with dask.config.set({"distributed.worker.daemon": False}):
         cluster = distributed.LocalCluster(n_workers=workers or max(1, os.cpu_count() or 1), threads_per_worker=1,
-                                           processes=True, dashboard_address=None)
+                                           processes=True, dashboard_address=None, **NO_DASHBOARD)
     with cluster, distributed.Client(cluster) as client:
         yield client
 

@@ -91,7 +91,7 @@ def killed_worker(cells: int, runs: int, out: Path) -> dict[str, Any]:
     file = out / "scheduler.json"
     try:
         start("distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-              "--scheduler-file", str(file))
+              "--dashboard-address", ":0", "--scheduler-file", str(file))
         wait_for(lambda: sweep.read_json(file))
         workers = {start("distributed.cli.dask_worker", "--scheduler-file", str(file), "--nthreads", "1", "--no-nanny",
                          "--no-dashboard").pid for _ in range(2)}

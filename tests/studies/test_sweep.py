@@ -53,11 +53,8 @@ def wait_for(condition, what: str, timeout: float = PATIENCE, every: float = 0.0
 def scheduler():
     """A local cluster of 2 worker processes as Dask starts them by default (daemon processes),
     shared by the tests that pass --scheduler ADDRESS."""
-    import dask
-
-    with dask.config.set({"distributed.scheduler.dashboard.address": ":0"}):
-        local = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
-    with local:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  **cluster.NO_DASHBOARD) as local:
         yield local.scheduler_address
 
 
@@ -278,7 +275,7 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
     try:
         scheduler_file = tmp_path / "scheduler.json"
         start("scheduler", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
-              "--scheduler-file", str(scheduler_file))
+              "--dashboard-address", ":0", "--scheduler-file", str(scheduler_file))
         wait_for(lambda: scheduler_file.exists() and sweep.read_json(scheduler_file), "the scheduler")
         workers = [start(f"worker{i}", "distributed.cli.dask_worker", "--scheduler-file", str(scheduler_file),
                          "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{i}") for i in (1, 2)]
