@@ -106,6 +106,16 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         yield client
 
 
+@contextlib.contextmanager
+def client_if_asked(args: argparse.Namespace) -> Iterator[Any]:
+    """:func:`open_client` if the flags ask for Dask (:func:`wants_dask`), else None."""
+    if not wants_dask(args):
+        yield None
+        return
+    with open_client(args.scheduler, args.workers) as client:
+        yield client
+
+
 def check_workers_can_write(client: Any, folder: Path) -> None:
     """Every worker can write into ``folder`` (an absolute path).
 
@@ -192,3 +202,22 @@ def run_calls(fn: Callable[..., Any], calls: Iterable[Sequence[Any]], done: Call
         unfinished = [f for f in futures if not f.done()]
         if unfinished:
             client.cancel(unfinished)
+
+
+def results_in_order(fn: Callable[..., Any], calls: Iterable[Sequence[Any]], *, client: Any = None,
+                     kwargs: Mapping[str, Any] | None = None, each: Callable[[], Any] = lambda: None
+                     ) -> tuple[list[Any], bool]:
+    """:func:`run_calls`, its results in the order of ``calls`` (``each()`` after each one):
+    ``(results, interrupted)``; after Ctrl-C, the results of the calls that finished."""
+    finished: dict[int, Any] = {}
+
+    def done(index: int, result: Any) -> None:
+        finished[index] = result
+        each()
+
+    try:
+        run_calls(fn, calls, done, client=client, kwargs=kwargs)
+        interrupted = False
+    except KeyboardInterrupt:
+        interrupted = True
+    return [finished[index] for index in sorted(finished)], interrupted

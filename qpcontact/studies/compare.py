@@ -36,7 +36,6 @@ one panel per scene family and formulation), ``solvers_scenes.png`` (top views o
 from __future__ import annotations
 
 import argparse
-import contextlib
 import csv
 import math
 import multiprocessing
@@ -574,14 +573,11 @@ def run_command(args: argparse.Namespace) -> int:
     tolerances = args.tolerances or ([1e-3, 1e-6] if args.quick else list(DEFAULT_TOLERANCES))
     repeats = args.repeats or (1 if args.quick else 3)
     started = datetime.now(UTC)
-    finished_rows: dict[int, dict[str, Any]] = {}
     scene_lines = []
     done: list[SceneCase] = []
-    interrupted = False
     warm = warm_up_system()
-    with contextlib.ExitStack() as stack:
-        client = stack.enter_context(cluster.open_client(args.scheduler, args.workers)) if cluster.wants_dask(args) else None
-        bar = stack.enter_context(tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True))
+    with cluster.client_if_asked(args) as client, \
+            tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True) as bar:
 
         def runs() -> Iterator[tuple[Prepared, Method, float]]:
             """Each case's references (prepared here), then its runs (here, or as Dask tasks)."""
@@ -603,16 +599,9 @@ def run_command(args: argparse.Namespace) -> int:
                             continue  # dense-only backends are not run on large scenes (stated in the report)
                         yield prepared, method, tolerance
 
-        def finished_run(index: int, row: dict[str, Any]) -> None:
-            finished_rows[index] = row
-            bar.update()
-
-        try:
-            cluster.run_calls(run_one, runs(), finished_run, client=client,
-                              kwargs={"time_limit": args.time_limit, "repeats": repeats, "warm": warm})
-        except KeyboardInterrupt:
-            interrupted = True
-    rows = [finished_rows[index] for index in sorted(finished_rows)]
+        rows, interrupted = cluster.results_in_order(
+            run_one, runs(), client=client, kwargs={"time_limit": args.time_limit, "repeats": repeats, "warm": warm},
+            each=bar.update)
     finished = datetime.now(UTC)
     if not rows:
         print("qpcontact compare: interrupted before any run finished; nothing written", file=sys.stderr)

@@ -45,7 +45,6 @@ Every run happens in a child process killed after the guard
 from __future__ import annotations
 
 import argparse
-import contextlib
 import fnmatch
 import multiprocessing
 import platform
@@ -407,12 +406,9 @@ def run_command(args: argparse.Namespace) -> int:
     scalings = args.scaling or ([True] if args.quick else [True, False])
     repeats = args.repeats or (1 if args.quick else 3)
     preps: dict[str, Prepared] = {}
-    finished: dict[int, dict[str, Any]] = {}
     started = datetime.now(UTC)
     total = len(cases) * len(triples) * len(scalings)
-    with contextlib.ExitStack() as stack:
-        client = stack.enter_context(cluster.open_client(args.scheduler, args.workers)) if cluster.wants_dask(args) else None
-        bar = stack.enter_context(tqdm(total=total, unit="run"))
+    with cluster.client_if_asked(args) as client, tqdm(total=total, unit="run") as bar:
 
         def calls() -> Iterator[tuple[Prepared, str, str, str, bool]]:
             for case in cases:
@@ -422,16 +418,9 @@ def run_command(args: argparse.Namespace) -> int:
                     for solver, formulation, form in triples:
                         yield prep, solver, formulation, form, scale
 
-        def done(index: int, row: dict[str, Any]) -> None:
-            finished[index] = row
-            bar.update()
-
-        try:
-            cluster.run_calls(guarded, calls(), done, client=client,
-                              kwargs={"time_limit": args.time_limit, "guard": args.guard, "repeats": repeats})
-        except KeyboardInterrupt:
-            pass
-    rows = [finished[index] for index in sorted(finished)]
+        rows, _ = cluster.results_in_order(
+            guarded, calls(), client=client,
+            kwargs={"time_limit": args.time_limit, "guard": args.guard, "repeats": repeats}, each=bar.update)
     interrupted = len(rows) < total
     header = (f"# Stability run\n\n{started:%Y-%m-%d %H:%M} UTC, {platform.node()} ({multiprocessing.cpu_count()} cores, "
               f"{platform.processor() or platform.machine()}), seed {args.seed}, tolerance {TOLERANCE:g}, time limit "

@@ -69,14 +69,19 @@ def as_a_sweep(cells: int, runs: int, workers: int, out: Path) -> dict[str, Any]
     return {"wall": wall, "task_seconds": [float(r["task_seconds"]) for r in rows]}
 
 
-def wait_for(condition: Any, timeout: float = 600.0) -> Any:
+def wait_for(condition: Any, what: str = "a condition", timeout: float = 600.0, every: float = 0.05) -> Any:
+    """The first true value of ``condition()``, asked every ``every`` seconds.
+
+    Raises:
+        TimeoutError: none within ``timeout`` seconds (naming ``what``).
+    """
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         value = condition()
         if value:
             return value
-        time.sleep(0.05)
-    raise RuntimeError("timed out")
+        time.sleep(every)
+    raise TimeoutError(f"timed out waiting for {what}")
 
 
 def killed_worker(cells: int, runs: int, out: Path) -> dict[str, Any]:
@@ -92,7 +97,7 @@ def killed_worker(cells: int, runs: int, out: Path) -> dict[str, Any]:
     try:
         start("distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
               "--dashboard-address", ":0", "--scheduler-file", str(file))
-        wait_for(lambda: sweep.read_json(file))
+        wait_for(lambda: sweep.read_json(file), "the scheduler")
         workers = {start("distributed.cli.dask_worker", "--scheduler-file", str(file), "--nthreads", "1", "--no-nanny",
                          "--no-dashboard").pid for _ in range(2)}
         folder = out / "sweep"
@@ -110,7 +115,7 @@ def killed_worker(cells: int, runs: int, out: Path) -> dict[str, Any]:
                     return f"seed-{seed}", started[-1]["pid"], int(rows[-1]["step"]) if rows else -1
             return None
 
-        name, pid, reached = wait_for(victim)
+        name, pid, reached = wait_for(victim, "a run past a snapshot")
         time.sleep(2.0)  # in the middle of the run, past its snapshot
         reached = max(reached, int(RunFolder(folder / "runs" / name).read_history_rows()[-1]["step"]))
         os.kill(pid, signal.SIGKILL)
