@@ -148,6 +148,8 @@ def varied_values(name: str, values: Sequence[Any], source: str) -> tuple[str, l
                 raise InvalidArgumentError(f"{source}: {name}={value}: {exc}") from None
         if choices is not None and value not in choices:
             raise InvalidArgumentError(f"{source}: {name}={value!r}: not one of {', '.join(map(str, choices))}")
+        if field == "model" and isinstance(value, str) and value:  # the workers may start elsewhere
+            value = str(Path(value).resolve())
         out.append(value)
     return field, out
 
@@ -358,9 +360,9 @@ def run_lock(folder: Path) -> Iterator[None]:
 
 def run_task(name: str, values: Mapping[str, Any], folder: str, snapshot_every: int) -> dict[str, Any]:
     """One run of a sweep, in its folder: idempotent (module docstring), one task at a time per
-    run (:func:`run_lock`). Returns its outcome: ``name``, ``status`` (``done`` or ``failed``),
-    ``error``, ``traceback`` and the :data:`MEASURES`; it raises only what the folder's files
-    raise."""
+    run (:func:`run_lock`). Returns its outcome: ``name``, ``status`` (``done``, ``failed``, or
+    ``stopped`` by the sweep's stop flag, :func:`stoppable`), ``error``, ``traceback`` and the
+    :data:`MEASURES`; it raises only what opening the folder raises."""
     with run_lock(Path(folder)):
         return _run(name, values, Path(folder), snapshot_every)
 
@@ -407,7 +409,7 @@ def _run(name: str, values: Mapping[str, Any], path: Path, snapshot_every: int) 
         draw_pictures(run_folder, settings, run, gif=False)
         measures = run_measures(run_folder.read_history(), run.colony.cells.axes, run.colony.cells.n, run.colony.time,
                                 settings.dimensions)
-        error = run.error or (f"stopped by signal {run.interrupted}" if run.interrupted else "")
+        error = run.error
         if run.exception is not None and run.exception.__cause__ is not None:  # a model hook's own traceback
             outcome["traceback"] = "".join(traceback.format_exception(run.exception.__cause__))
         outcome.update(measures, status="failed" if error else "done", error=error)
@@ -752,9 +754,12 @@ def run_command(args: argparse.Namespace) -> int:
           + (f" on {args.scheduler}" if args.scheduler else ""), file=sys.stderr)
     completed = True
     if runs:
-        with cluster.open_client(args.scheduler, args.workers or min(len(runs), os.cpu_count() or 1)) as client:
-            cluster.check_workers_can_write(client, sweep.out)
-            completed = execute(sweep, client, runs, progress=not args.quiet)
+        try:
+            with cluster.open_client(args.scheduler, args.workers or min(len(runs), os.cpu_count() or 1)) as client:
+                cluster.check_workers_can_write(client, sweep.out)
+                completed = execute(sweep, client, runs, progress=not args.quiet)
+        except KeyboardInterrupt:  # while the cluster started or closed: the runs stay as they are
+            completed = False
     sweep.to_do()  # runs that finished while the sweep stopped, or whose answer was lost, are done
     written = [sweep.save(), sweep.write_summary()]
     ensemble = sweep.write_ensemble()
