@@ -35,6 +35,10 @@ BAD_COMMAND_LINES = [
     ["stability", "--formulations", "linear"],
     ["stability", "--seed", "-1"],
     ["simulate", "--no-such-flag"],
+    ["sweep", "--seeds", "-1"],
+    ["sweep", "--vary", "growth_inertia"],
+    ["sweep", "--seeds", "1", "--replicates", "2"],
+    ["sweep", "--workers", "0"],
     ["frobnicate"],
 ]
 
@@ -104,7 +108,7 @@ def test_the_same_flag_names_everywhere():
             assert {"--out", "--overwrite"} <= flags, name
 
 
-@pytest.mark.parametrize("name", ["simulate", "compare", "stability", "bench"])
+@pytest.mark.parametrize("name", ["simulate", "compare", "stability", "bench", "sweep"])
 def test_outputs_go_to_a_folder_of_the_commands_name_by_default(name):
     """stability and bench wrote into docs/ by default."""
     assert parsers()[name].parse_args([]).out == Path(f"{name}-out")

@@ -305,11 +305,12 @@ def write_toml(values: Mapping[str, Any], comment: str = "") -> str:
     return head + "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items())
 
 
-def read_toml(path: str | Path) -> dict[str, Any]:
-    """A flat TOML table.
+def read_toml(path: str | Path, tables: Sequence[str] = ()) -> dict[str, Any]:
+    """A flat TOML table; the tables named in ``tables`` (e.g. ``[sweep]``) are kept as they are.
 
     Raises:
-        InvalidArgumentError: the file is missing, not TOML, or has nested tables or arrays.
+        InvalidArgumentError: the file is missing, not TOML, or has nested tables or arrays
+            other than ``tables``.
     """
     try:
         with open(path, "rb") as fh:
@@ -318,7 +319,7 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise InvalidArgumentError(f"{path}: no such file") from None
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InvalidArgumentError(f"{path}: not a TOML file ({exc})") from None
-    nested = [key for key, value in values.items() if isinstance(value, (dict, list))]
+    nested = [key for key, value in values.items() if isinstance(value, (dict, list)) and key not in tables]
     if nested:
         raise InvalidArgumentError(f"{path}: only 'name = value' lines are read; {', '.join(nested)} is a table or array")
     return values

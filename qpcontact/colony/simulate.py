@@ -603,12 +603,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                           "needs meshio: pip install 'qpcontact[vtk]'")
     run.add_argument("--gif", action="store_true", default=argparse.SUPPRESS, help="also write an animation colony.gif")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
-    model = parser.add_argument_group("model settings (also in --config; saved in config.toml)")
+    add_setting_flags(parser.add_argument_group("model settings (also in --config; saved in config.toml)"))
+
+
+def add_setting_flags(group: Any) -> None:
+    """The flags of :data:`SETTING_FLAGS` (a flag not given is absent from the parsed arguments:
+    :func:`flags_given`)."""
     defaults = Settings()
     for flag, name, kind, help_, choices in SETTING_FLAGS:
         default = getattr(defaults, name)
         metavar = None if choices else {int: "N", float: "X"}.get(type(default), "FILE" if name == "model" else "NAME")
-        model.add_argument(flag, dest=name, type=kind, choices=choices, default=argparse.SUPPRESS, metavar=metavar,
+        group.add_argument(flag, dest=name, type=kind, choices=choices, default=argparse.SUPPRESS, metavar=metavar,
                            help=f"{help_} (default: {default!r})")
 
 

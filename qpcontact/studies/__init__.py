@@ -7,10 +7,12 @@ Nothing in the other wings imports from here.
   cases of the stability report (:data:`CATALOGUE`);
 - :mod:`.harness`: what the comparison and the stability report share (:func:`prepare`,
   :func:`guarded`, :func:`write_csv`);
-- commands: :mod:`.demo`, :mod:`.compare`, :mod:`.stability`, :mod:`.bench` (``qpcontact
-  COMMAND``);
+- commands: :mod:`.demo`, :mod:`.compare`, :mod:`.stability`, :mod:`.bench`, :mod:`.sweep`
+  (``qpcontact COMMAND``); :mod:`.cluster`: Dask for the sweep, compare and stability (extra
+  ``qpcontact[sweep]``, imported only by them);
 - longer measurements run as modules: :mod:`.colony_benchmark` (error against run time over
-  whole colony runs) and :mod:`.colony_10k` (steps of a 10⁴-cell colony).
+  whole colony runs), :mod:`.colony_10k` (steps of a 10⁴-cell colony) and
+  :mod:`.sweep_benchmark` (a sweep on Dask against its runs one after the other, a killed worker).
 """
 
 # isort: off

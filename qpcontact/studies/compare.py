@@ -24,7 +24,9 @@ solver says it converged (and passes the package's own acceptance checks) and it
 within ``ACCURACY_FACTOR·tolerance`` of the reference; a run that says it converged but is not
 that close is counted as *reported success, inaccurate*. Each run is made in a child process
 with a hard time-out (:func:`qpcontact.studies.harness.guarded`), so a backend without a time
-limit of its own (or one that crashes) cannot stop the comparison.
+limit of its own (or one that crashes) cannot stop the comparison. With ``--scheduler ADDRESS``
+or ``--workers N`` the runs are Dask tasks (:mod:`qpcontact.studies.cluster`), each still in its
+guarded child process with the same time-out; the references are computed here meanwhile.
 
 Outputs in ``--out``: ``solvers.csv`` (every run), ``solvers.png`` (error against time, log–log,
 one panel per scene family and formulation), ``solvers_scenes.png`` (top views of the scenes),
@@ -40,6 +42,7 @@ import multiprocessing
 import platform
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -55,7 +58,7 @@ from ..geometry import colliding, find_contacts
 from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import metrics, solve_system
 from ..solvers import QP_FORMS, available_solvers, get_solver
-from . import harness
+from . import cluster, harness
 from .harness import Prepared
 from .scenes import make_scene
 
@@ -550,6 +553,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         "one repeat (about a minute)")
     parser.add_argument("--replot", type=Path, metavar="CSV",
                         help="only redraw solvers.png in --out from a CSV of an earlier run (no solving)")
+    cluster.add_cluster_arguments(parser, local_by_default=False)
 
 
 def run_command(args: argparse.Namespace) -> int:
@@ -569,13 +573,14 @@ def run_command(args: argparse.Namespace) -> int:
     tolerances = args.tolerances or ([1e-3, 1e-6] if args.quick else list(DEFAULT_TOLERANCES))
     repeats = args.repeats or (1 if args.quick else 3)
     started = datetime.now(UTC)
-    rows: list[dict[str, Any]] = []
     scene_lines = []
     done: list[SceneCase] = []
-    interrupted = False
     warm = warm_up_system()
-    try:
-        with tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True) as bar:
+    with cluster.client_if_asked(args) as client, \
+            tqdm(total=len(cases) * len(methods) * len(tolerances), unit="run", dynamic_ncols=True) as bar:
+
+        def runs() -> Iterator[tuple[Prepared, Method, float]]:
+            """Each case's references (prepared here), then its runs (here, or as Dask tasks)."""
             for case in cases:
                 bar.set_description(f"{case.name}: references")
                 prepared = prepare(case)
@@ -592,11 +597,11 @@ def run_command(args: argparse.Namespace) -> int:
                         if dense_only and n > DENSE_MAX_UNKNOWNS:
                             bar.update()
                             continue  # dense-only backends are not run on large scenes (stated in the report)
-                        rows.append(run_one(prepared, method, tolerance, time_limit=args.time_limit, repeats=repeats,
-                                            warm=warm))
-                        bar.update()
-    except KeyboardInterrupt:
-        interrupted = True
+                        yield prepared, method, tolerance
+
+        rows, interrupted = cluster.results_in_order(
+            run_one, runs(), client=client, kwargs={"time_limit": args.time_limit, "repeats": repeats, "warm": warm},
+            each=bar.update)
     finished = datetime.now(UTC)
     if not rows:
         print("qpcontact compare: interrupted before any run finished; nothing written", file=sys.stderr)

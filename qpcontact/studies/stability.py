@@ -37,7 +37,9 @@ that runs with ``scale=False`` are measured the same way):
   position correction, which legitimately adds energy to clear overlaps).
 
 Every run happens in a child process killed after the guard
-(:func:`qpcontact.studies.harness.guarded`), so no backend can hang the report.
+(:func:`qpcontact.studies.harness.guarded`), so no backend can hang the report. With
+``--scheduler ADDRESS`` or ``--workers N`` the runs are Dask tasks
+(:mod:`qpcontact.studies.cluster`), each still in its guarded child process with the same guard.
 """
 
 from __future__ import annotations
@@ -49,6 +51,7 @@ import platform
 import sys
 import time
 import traceback
+from collections.abc import Iterator
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -68,7 +71,7 @@ from ..errors import InvalidArgumentError, QPContactError
 from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import metrics, resolve
 from ..solvers import DEFAULT_FORM, QP_FORMS, QP_FORMULATIONS, available_solvers, get_solver
-from . import harness
+from . import cluster, harness
 from .catalogue import CATALOGUE
 from .harness import Prepared
 from .scenes import Scene
@@ -378,6 +381,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--regularization", action="store_true",
                         help="only the ε study: least_squares distance to the reference for several ε "
                              "(stability_regularization.md)")
+    cluster.add_cluster_arguments(parser, local_by_default=False)
 
 
 def run_command(args: argparse.Namespace) -> int:
@@ -402,20 +406,21 @@ def run_command(args: argparse.Namespace) -> int:
     scalings = args.scaling or ([True] if args.quick else [True, False])
     repeats = args.repeats or (1 if args.quick else 3)
     preps: dict[str, Prepared] = {}
-    rows: list[dict[str, Any]] = []
     started = datetime.now(UTC)
     total = len(cases) * len(triples) * len(scalings)
-    try:
-        with tqdm(total=total, unit="run") as bar:
+    with cluster.client_if_asked(args) as client, tqdm(total=total, unit="run") as bar:
+
+        def calls() -> Iterator[tuple[Prepared, str, str, str, bool]]:
             for case in cases:
                 bar.set_description(case.name)
                 prep = preps[case.name] = prepare(case, args.seed)
                 for scale in scalings:
                     for solver, formulation, form in triples:
-                        rows.append(guarded(prep, solver, formulation, form, scale, args.time_limit, args.guard, repeats))
-                        bar.update()
-    except KeyboardInterrupt:
-        pass
+                        yield prep, solver, formulation, form, scale
+
+        rows, _ = cluster.results_in_order(
+            guarded, calls(), client=client,
+            kwargs={"time_limit": args.time_limit, "guard": args.guard, "repeats": repeats}, each=bar.update)
     interrupted = len(rows) < total
     header = (f"# Stability run\n\n{started:%Y-%m-%d %H:%M} UTC, {platform.node()} ({multiprocessing.cpu_count()} cores, "
               f"{platform.processor() or platform.machine()}), seed {args.seed}, tolerance {TOLERANCE:g}, time limit "

@@ -1,0 +1,351 @@
+"""qpcontact sweep (qpcontact.studies.sweep) and the Dask helpers (qpcontact.studies.cluster): the
+grid and its checks before anything starts, a small sweep on a 2-worker local cluster, failed runs
+reported by name, a stopped sweep resumed, a killed worker, and compare/stability on Dask with
+their time limits kept. The runs are tiny (10-60 cells, a few seconds each)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from qpcontact import cli
+from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
+from qpcontact.colony.simulate import Settings, run_colony
+from qpcontact.errors import InvalidArgumentError
+from qpcontact.studies import cluster, harness, sweep
+from qpcontact.studies.sweep_benchmark import wait_for
+
+distributed = pytest.importorskip("distributed")
+
+ROOT = Path(__file__).resolve().parents[2]
+#: Seconds any wait of these tests may take before it fails the test.
+PATIENCE = 120.0
+
+
+def read_summary(out: Path) -> dict[str, dict[str, str]]:
+    with (out / sweep.SUMMARY_FILE).open(newline="") as fh:
+        return {row["name"]: row for row in csv.DictReader(fh)}
+
+
+def attempts(out: Path, name: str) -> list[dict]:
+    return sweep.attempts_of(out / "runs" / name)
+
+
+@pytest.fixture(scope="module")
+def scheduler():
+    """A local cluster of 2 worker processes as Dask starts them by default (daemon processes),
+    shared by the tests that pass --scheduler ADDRESS."""
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                  **cluster.NO_DASHBOARD) as local:
+        yield local.scheduler_address
+
+
+# ------------------------------------------------------------------------------------------
+# The grid, checked before anything starts
+# ------------------------------------------------------------------------------------------
+def test_the_grid_is_seeds_times_the_product_of_the_varied_lists_or_their_zip():
+    grid = sweep.Grid({"growth_inertia": [100.0, 1000.0], "overlap_tolerance": [0.01, 0.02]}, [1, 2])
+    runs = sweep.plan_runs(Settings(n_cells=10), grid)
+    assert len(runs) == 8 and len({r["name"] for r in runs}) == 8
+    assert runs[0]["name"] == "growth_inertia-100__overlap_tolerance-0.01__seed-1"
+    assert runs[0]["settings"]["n_cells"] == 10 and runs[-1]["settings"]["seed"] == 2
+    assert runs[-1]["varied"] == {"growth_inertia": 1000.0, "overlap_tolerance": 0.02, "seed": 2}
+    zipped = sweep.plan_runs(Settings(), sweep.Grid({"n_cells": [10, 20], "dimensions": [2, 3]}, [5], zip=True))
+    assert [r["name"] for r in zipped] == ["n_cells-10__dimensions-2__seed-5", "n_cells-20__dimensions-3__seed-5"]
+    assert [r["name"] for r in sweep.plan_runs(Settings(), sweep.Grid({}, [3, 4]))] == ["seed-3", "seed-4"]
+
+
+def test_the_grid_from_a_configuration_file_with_flags_overriding_it(tmp_path):
+    config = tmp_path / "sweep.toml"
+    config.write_text('n_cells = 12\nsolver = "osqp"\nsnapshot_every = 7\n\n[sweep]\nseeds = [4, 5]\n\n'
+                      '[sweep.vary]\ngrowth_inertia = [100, 1000]\novershoot = []\n')
+    args = cli.command_parser(cli.build_parser("sweep"), "sweep").parse_args(["--config", str(config)])
+    with pytest.raises(InvalidArgumentError, match="unknown setting 'overshoot'"):
+        sweep.configure(args)
+    config.write_text(config.read_text().replace("overshoot = []\n", ""))
+    base, options, grid = sweep.configure(args)
+    assert (base.n_cells, base.solver, options.snapshot_every) == (12, "osqp", 7)
+    assert grid.vary == {"growth_inertia": [100, 1000]} and grid.seeds == [4, 5]
+    args = cli.command_parser(cli.build_parser("sweep"), "sweep").parse_args(
+        ["--config", str(config), "--cells", "20", "--seeds", "9", "--vary", "growth-inertia=5", "--snapshot-every", "3"])
+    base, options, grid = sweep.configure(args)
+    assert (base.n_cells, options.snapshot_every, grid.seeds, grid.vary) == (20, 3, [9], {"growth_inertia": [5.0]})
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--vary", "growth_inertia=100,-1"], "growth_inertia=-1: must be a finite number > 0"),
+    (["--vary", "nosuch=1,2"], "unknown setting 'nosuch' to vary"),
+    (["--vary", "dimensions=2,4"], "dimensions=4: not one of 2, 3"),
+    (["--vary", "solver=clarabel,nosuch"], "nosuch"),
+    (["--vary", "seed=1,2"], "vary the seed with --seeds"),
+    (["--vary", "cells=10,20", "--vary", "dimensions=2", "--zip"], "the varied lists must have the same length"),
+    (["--vary", "step=position,velocity", "--vary", "dynamics=overdamped,inertial"],
+     "run step-position__dynamics-inertial__seed-1: dynamics: the position step is overdamped"),
+    (["--vary", "growth_inertia=100,100"], "two runs named 'growth_inertia-100__seed-1'"),
+    (["--vary", "model=nosuch.py"], "nosuch.py"),
+    (["--resume"], "holds no sweep to resume"),
+])
+def test_a_bad_setting_is_rejected_before_any_task_starts(argv, message, tmp_path, capsys, monkeypatch):
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(cluster, "open_client", no_cluster)
+    out = tmp_path / "out"
+    assert cli.main(["sweep", "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("qpcontact sweep: ") and message in err, err
+    assert not out.exists()
+
+
+def test_sweep_without_dask_says_which_extra_to_install(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed -> ImportError
+    assert cli.main(["sweep", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pip install 'qpcontact[sweep]'" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_an_earlier_sweep_is_refused_unless_resumed_or_overwritten(tmp_path, capsys):
+    (tmp_path / sweep.SWEEP_FILE).write_text("{}")
+    assert cli.main(["sweep", "--out", str(tmp_path)]) == 2
+    assert "holds a sweep (sweep.json); continue it with --resume" in capsys.readouterr().err
+    assert cli.main(["sweep", "--out", str(tmp_path), "--resume", "--cells", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "--resume continues the sweep" in err and "drop --cells" in err, err
+
+
+def test_nematic_order():
+    assert sweep.nematic_order(np.array([[1.0, 0, 0]] * 5), 2) == pytest.approx(1.0)
+    assert sweep.nematic_order(np.array([[1.0, 0, 0], [0, 1.0, 0]]), 2) == pytest.approx(0.0, abs=1e-12)
+    assert sweep.nematic_order(np.eye(3), 3) == pytest.approx(0.0, abs=1e-12)
+    assert sweep.nematic_order(np.array([[0, 0, 1.0]] * 3), 3) == pytest.approx(1.0)
+
+
+# ------------------------------------------------------------------------------------------
+# One run's task: idempotent, continued from its folder
+# ------------------------------------------------------------------------------------------
+def test_a_run_task_continues_a_cut_run_from_its_snapshot_exactly_and_is_done_once(tmp_path):
+    values = Settings(n_cells=12, seed=3).to_dict()
+    whole = sweep.run_task("whole", values, str(tmp_path / "whole"), 5)
+    assert whole["status"] == "done" and whole["attempts"] == 1 and whole["cells"] >= 12
+    # A run cut short: snapshots to step 15, history rows beyond it (a worker killed at step 18).
+    cut = tmp_path / "cut"
+    folder = RunFolder.create(cut)
+    run_colony(Settings(**{**values, "max_steps": 18}), progress=False, folder=folder, snapshot_every=5)
+    (cut / "snapshots" / "step_000018.npz").unlink()
+    outcome = sweep.run_task("cut", values, str(cut), 5)
+    assert outcome["status"] == "done" and [a["from_step"] for a in sweep.attempts_of(cut)] == [15]
+    ours, theirs = RunFolder(cut).read_history(), RunFolder(tmp_path / "whole").read_history()
+    for name in set(HISTORY_FIELDS) - set(TIMING_FIELDS):
+        np.testing.assert_array_equal(ours[name], theirs[name], err_msg=name)
+    assert {k: outcome[k] for k in ("cells", "steps", "largest_overlap", "order")} == \
+        {k: whole[k] for k in ("cells", "steps", "largest_overlap", "order")}
+    assert sweep.run_task("cut", values, str(cut), 5) == json.loads((cut / sweep.RESULT_FILE).read_text())
+    assert len(sweep.attempts_of(cut)) == 1  # done: not started again
+
+
+# ------------------------------------------------------------------------------------------
+# Sweeps on Dask
+# ------------------------------------------------------------------------------------------
+def test_a_small_sweep_on_a_two_worker_local_cluster(tmp_path, capsys):
+    out = tmp_path / "sweep"
+    code = sweep.main(["--cells", "10", "--seeds", "1,2", "--vary", "growth_inertia=100,1000", "--workers", "2",
+                       "--snapshot-every", "10", "--quiet", "--out", str(out)])
+    printed = capsys.readouterr().out
+    assert code == 0, printed
+    assert "4 runs: 4 done, 0 failed, 0 not finished" in printed
+    summary = read_summary(out)
+    names = ["growth_inertia-100__seed-1", "growth_inertia-100__seed-2", "growth_inertia-1000__seed-1",
+             "growth_inertia-1000__seed-2"]
+    assert list(summary) == names
+    assert tuple(next(iter(summary.values()))) == sweep.Sweep.load(out).summary_columns()
+    for name, row in summary.items():
+        assert row["status"] == "done" and row["attempts"] == "1" and not row["error"]
+        assert int(row["cells"]) >= 10 and 0 <= float(row["order"]) <= 1 and float(row["largest_overlap"]) >= 0
+        folder = out / "runs" / name
+        assert {"config.toml", "history.csv", "colony.png", "history.png", "result.json"} <= {p.name for p in folder.iterdir()}
+        assert RunFolder(folder).latest_snapshot() is not None
+        assert f"growth_inertia = {float(row['growth_inertia'])!r}" in (folder / "config.toml").read_text()
+    assert len({row["worker"] for row in summary.values()}) == 2  # both workers ran runs
+    assert (out / sweep.ENSEMBLE_FILE).stat().st_size > 10_000
+    assert all(run["status"] == "done" for run in json.loads((out / sweep.SWEEP_FILE).read_text())["runs"])
+
+
+def test_failed_runs_are_reported_by_name_with_their_error_and_resume_redoes_only_them(scheduler, tmp_path, capsys):
+    (tmp_path / "good.py").write_text("def hook(colony, step):\n    return None\n")
+    (tmp_path / "bad.py").write_text("def hook(colony, step):\n    if step == 3:\n"
+                                     "        raise ValueError('the model broke at step 3')\n")
+    out = tmp_path / "sweep"
+    argv = ["--cells", "8", "--seeds", "1,2", "--vary", f"model={tmp_path / 'good.py'},{tmp_path / 'bad.py'}",
+            "--scheduler", scheduler, "--quiet", "--out", str(out)]
+    assert sweep.main(argv) == 1
+    printed, err = capsys.readouterr()
+    assert "4 runs: 2 done, 2 failed, 0 not finished" in printed
+    for seed in (1, 2):
+        assert f"failed: model-bad.py__seed-{seed}: step 3 (t = " in printed
+        assert "the model broke at step 3" in printed.split(f"model-bad.py__seed-{seed}")[1].splitlines()[0]
+    assert "2 runs failed" in err
+    summary = read_summary(out)
+    assert summary["model-bad.py__seed-1"]["status"] == "failed" and "the model broke" in summary["model-bad.py__seed-1"]["error"]
+    runs = {r["name"]: r for r in json.loads((out / sweep.SWEEP_FILE).read_text())["runs"]}
+    assert "ValueError: the model broke at step 3" in runs["model-bad.py__seed-2"]["traceback"]
+    # --resume runs the failed ones again (they fail again), not the done ones.
+    assert sweep.main(["--resume", "--scheduler", scheduler, "--quiet", "--out", str(out)]) == 1
+    assert "sweep of 4 runs into" in (err := capsys.readouterr().err) and "; 2 to do" in err
+    assert [len(attempts(out, n)) for n in summary] == [1, 1, 2, 2]
+
+
+def _sweep_process(argv: list[str], log: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "qpcontact", "sweep", "--quiet", *argv], cwd=ROOT,
+                            stdout=log.open("w"), stderr=subprocess.STDOUT)
+
+
+@pytest.mark.slow
+def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_path):
+    """Ctrl-C stops the sweep (status 130); the run cut short continues from its snapshot; the
+    finished runs are not run again."""
+    out = tmp_path / "sweep"
+    names = ["seed-1", "seed-2", "seed-3"]
+    process = _sweep_process(["--cells", "80", "--seeds", "1,2,3", "--snapshot-every", "5", "--workers", "1",
+                              "--out", str(out)], tmp_path / "first.log")
+    try:
+        def one_done_and_one_cut() -> bool:
+            done = [n for n in names if (out / "runs" / n / sweep.RESULT_FILE).exists()]
+            started = [n for n in names if n not in done and RunFolder(out / "runs" / n).latest_snapshot() is not None]
+            return bool(done and started)
+
+        wait_for(one_done_and_one_cut, "a run done and another with a snapshot", PATIENCE)
+        process.send_signal(signal.SIGINT)
+        assert process.wait(PATIENCE) == 130, (tmp_path / "first.log").read_text()
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert "interrupted; continue with: qpcontact sweep --resume" in (tmp_path / "first.log").read_text()
+    done = [n for n in names if (out / "runs" / n / sweep.RESULT_FILE).exists()]
+    cut = [n for n in names if n not in done and RunFolder(out / "runs" / n).latest_snapshot() is not None]
+    assert done and cut and len(done) + len(cut) < 3
+    assert sweep.main(["--resume", "--workers", "2", "--quiet", "--out", str(out)]) == 0
+    summary = read_summary(out)
+    assert all(row["status"] == "done" for row in summary.values())
+    for name in names:
+        starts = [a["from_step"] for a in attempts(out, name)]
+        if name in done:
+            assert starts == [0], name  # not redone
+        elif name in cut:
+            assert len(starts) == 2 and starts[1] > 0, (name, starts)  # continued from its snapshot
+        else:
+            assert starts == [0], name
+
+
+@pytest.mark.slow
+def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
+    """A scheduler and two workers as separate processes (dask scheduler / dask worker); one
+    worker is killed (SIGKILL) in the middle of a run: every run finishes, the killed one is
+    continued from its latest snapshot on the other worker, no other run is started twice, and
+    the continued run ends exactly where an uninterrupted one does."""
+    processes: list[subprocess.Popen] = []
+    logs = tmp_path / "logs"
+    logs.mkdir()
+
+    def start(name: str, *argv: str) -> subprocess.Popen:
+        process = subprocess.Popen([sys.executable, "-m", *argv], stdout=(logs / f"{name}.log").open("w"),
+                                   stderr=subprocess.STDOUT, cwd=tmp_path)
+        processes.append(process)
+        return process
+
+    try:
+        scheduler_file = tmp_path / "scheduler.json"
+        start("scheduler", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+              "--dashboard-address", ":0", "--scheduler-file", str(scheduler_file))
+        wait_for(lambda: scheduler_file.exists() and sweep.read_json(scheduler_file), "the scheduler", PATIENCE)
+        workers = [start(f"worker{i}", "distributed.cli.dask_worker", "--scheduler-file", str(scheduler_file),
+                         "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{i}") for i in (1, 2)]
+        out = tmp_path / "sweep"
+        names = ["seed-1", "seed-2", "seed-3"]
+        client = _sweep_process(["--cells", "60", "--seeds", "1,2,3", "--snapshot-every", "5",
+                                 "--scheduler", str(scheduler_file), "--out", str(out)], logs / "sweep.log")
+        processes.append(client)
+        pids = {w.pid: w for w in workers}
+
+        def a_run_past_a_snapshot_on_a_worker() -> tuple[str, int] | None:
+            for name in names:
+                folder = out / "runs" / name
+                started = sweep.attempts_of(folder)
+                if started and not (folder / sweep.RESULT_FILE).exists() and RunFolder(folder).latest_snapshot():
+                    return name, started[-1]["pid"]
+            return None
+
+        victim, pid = wait_for(a_run_past_a_snapshot_on_a_worker, "a run with a snapshot", PATIENCE)
+        assert pid in pids
+        os.kill(pid, signal.SIGKILL)
+        pids[pid].wait(PATIENCE)
+        assert client.wait(PATIENCE) == 0, (logs / "sweep.log").read_text()
+    finally:
+        for process in reversed(processes):
+            if process.poll() is None:
+                process.kill()
+            process.wait()
+    summary = read_summary(out)
+    assert all(row["status"] == "done" for row in summary.values())  # runs lost: 0
+    for name in names:
+        starts = attempts(out, name)
+        if name == victim:  # redone: only the killed one, from its latest snapshot, on the other worker
+            assert len(starts) == 2 and starts[1]["from_step"] > 0 and starts[1]["pid"] != pid, starts
+        else:
+            assert len(starts) == 1, (name, starts)
+    # The continued run is the uninterrupted run.
+    whole = sweep.run_task("whole", Settings(n_cells=60, seed=int(victim.split("-")[1])).to_dict(),
+                           str(tmp_path / "whole"), 5)
+    ours, theirs = RunFolder(out / "runs" / victim).read_history(), RunFolder(tmp_path / "whole").read_history()
+    assert ours["max_overlap"] == theirs["max_overlap"] and ours["cells"] == theirs["cells"]
+    assert int(summary[victim]["cells"]) == whole["cells"]
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(cluster, "CONNECT_TIMEOUT", 1.0)
+    assert sweep.main(["--cells", "5", "--scheduler", "tcp://127.0.0.1:9", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "--scheduler tcp://127.0.0.1:9: cannot connect" in err and err.count("\n") <= 2, err
+
+
+# ------------------------------------------------------------------------------------------
+# compare and stability on Dask
+# ------------------------------------------------------------------------------------------
+def test_the_guarded_child_keeps_its_time_limit_inside_a_dask_task(scheduler):
+    """Dask's worker processes are daemons, which multiprocessing forbids to start children:
+    the task allows them, and the guard still kills a case at its limit."""
+    with distributed.Client(scheduler) as client:
+        t0 = time.perf_counter()
+        answer = client.submit(cluster.call, harness.guarded, (time.sleep, (60,), 2.0), {}, pure=False).result(PATIENCE)
+        assert answer == ("timeout", None) and time.perf_counter() - t0 < 30
+        assert client.submit(cluster.call, harness.guarded, (abs, (-3,), 30.0), {}, pure=False).result(PATIENCE) == ("ok", 3)
+
+
+def test_stability_and_compare_hand_their_cases_to_dask(scheduler, tmp_path):
+    from qpcontact.studies import compare, stability
+
+    common = ["--cases", "crossing,parallel_0", "--solvers", "linear,osqp", "--formulations", "complementarity",
+              "--scaling", "on", "--repeats", "1"]
+    assert stability.main([*common, "--out", str(tmp_path / "here")]) == 0
+    assert stability.main([*common, "--scheduler", scheduler, "--out", str(tmp_path / "dask")]) == 0
+
+    def rows(folder: Path, columns: int) -> list[list[str]]:
+        return [line.split(",")[:columns] for line in folder.read_text().splitlines()]
+
+    assert rows(tmp_path / "dask" / "stability.csv", 7) == rows(tmp_path / "here" / "stability.csv", 7)
+    assert compare.main(["--scenes", "two_rods", "--solvers", "linear,osqp", "--tolerances", "1e-6", "--repeats", "1",
+                         "--scheduler", scheduler, "--out", str(tmp_path / "compare")]) == 0
+    with (tmp_path / "compare" / "solvers.csv").open(newline="") as fh:
+        outcomes = [(r["method"], r["outcome"]) for r in csv.DictReader(fh)]
+    assert outcomes[0] == ("linear/linear/contact", "success") and len(outcomes) == 5
+    assert all(outcome == "success" for _, outcome in outcomes)
