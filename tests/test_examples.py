@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from qpcontact.colony import PositionSettings
+
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
 
@@ -23,7 +25,8 @@ def run_example(name: str, *argv: str) -> int:
 
 
 def test_every_example_is_tested():
-    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "performance_ab"}
+    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "performance_ab",
+              "foreign_state"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -31,6 +34,17 @@ def test_own_loop_clears_the_overlap(capsys):
     assert run_example("own_loop", "--steps", "30") == 0
     final = [line for line in capsys.readouterr().out.splitlines() if line.startswith("final largest overlap")]
     assert len(final) == 1 and float(final[0].split()[3]) < 1e-6
+
+
+def test_a_foreign_state_with_overlaps_of_0_15_is_cleared_without_spinning(capsys):
+    assert run_example("foreign_state", "--rows", "8", "--steps", "6") == 0
+    lines = capsys.readouterr().out.splitlines()
+    start = float(lines[0].split("largest overlap ")[1].split()[0])
+    rows = [line.split("|") for line in lines if "|" in line and line.split("|")[0].strip().isdigit()]
+    overlaps = [float(row[1]) for row in rows]
+    assert start > 0.14 and overlaps[-1] < 0.01  # the layer's rows overlap by 0.15 at the start
+    assert all(b <= a + 1e-9 for a, b in zip([start, *overlaps], overlaps, strict=False))
+    assert max(float(row[2]) for row in rows) <= PositionSettings().turn_limit
 
 
 def test_a_colony_between_walls_stays_between_them(tmp_path, capsys):
