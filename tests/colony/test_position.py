@@ -247,3 +247,49 @@ def test_warm_start_carries_contact_impulses_by_cell_id():
         position_step(cells, 0.05, ids=np.zeros(3, dtype=int))
     with pytest.raises(InvalidArgumentError, match="warm"):
         position_step(cells, 0.05, warm=[1, 2])
+
+
+def test_an_answer_the_solver_did_not_stand_by_is_never_applied(monkeypatch):
+    """Before: only a missing or non-finite answer failed the step; a stalled solve was applied."""
+    import dataclasses
+
+    import qpcontact.colony.position as position
+
+    real = position.solve
+    monkeypatch.setattr(position, "solve", lambda *a, **k: dataclasses.replace(real(*a, **k), found=False,
+                                                                               status="stalled"))
+    cells = scenes.colony_2d(60, 1)
+    with pytest.raises(StepFailedError, match="stalled") as caught:
+        position_step(cells, 0.05, drive=growing(cells))
+    assert not caught.value.result.converged
+
+
+def test_an_update_that_throws_cells_into_each_other_is_backtracked(monkeypatch):
+    """A linearization whose answer drives two rods through each other (as on a jammed 27,601-cell
+    colony) is not kept: the step goes back towards the last iterate and still converges."""
+    import dataclasses
+
+    import qpcontact.colony.position as position
+
+    real, calls = position.solve, []
+
+    def wild_first(*args, **kwargs):
+        out = real(*args, **kwargs)
+        calls.append(1)
+        return dataclasses.replace(out, y=-15.0 * out.y) if len(calls) == 1 else out
+
+    monkeypatch.setattr(position, "solve", wild_first)
+    cells = rods([[0, 0, 0], [0, 0.95, 0]], [[1, 0, 0], [1, 0, 0]], 2.0)
+    out = position_step(cells, 0.05, drive=np.zeros((2, 7)), planar=True,
+                        settings=PositionSettings(relaxation=1.0))
+    assert out.converged and out.max_overlap <= 0.01
+    assert max(out.overlaps) <= max(position.BACKTRACK_OVERLAP, out.overlaps[0])  # no kept iterate crossed
+
+
+def test_a_free_motion_within_the_tolerance_is_taken_without_a_solve():
+    """Before: a solve was forced; with nothing pushing, its scale (the largest approach, ~0) made
+    it ill-posed and the interior-point method stalled (a settled layer, no drive)."""
+    cells = rods([[0, 0, 0], [0, 1.003, 0]], [[1, 0, 0], [1, 0, 0]], 2.0)
+    out = position_step(cells, 0.05, drive=np.zeros((2, 7)), planar=True)
+    assert out.converged and out.iterations == 0 and out.solver_iterations == 0
+    assert np.array_equal(out.cells.centers, cells.centers) and not np.any(out.contact_impulses)
