@@ -215,7 +215,9 @@ def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_pa
     finished runs are not run again."""
     out = tmp_path / "sweep"
     names = ["seed-1", "seed-2", "seed-3"]
-    process = _sweep_process(["--cells", "80", "--seeds", "1,2,3", "--snapshot-every", "5", "--workers", "1",
+    # Runs of 600 cells take seconds each: a smaller run (80 cells, a fraction of a second with the
+    # position step) could finish between the wait below and the signal.
+    process = _sweep_process(["--cells", "600", "--seeds", "1,2,3", "--snapshot-every", "5", "--workers", "1",
                               "--out", str(out)], tmp_path / "first.log")
     try:
         def one_done_and_one_cut() -> bool:
@@ -272,7 +274,7 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
                          "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{i}") for i in (1, 2)]
         out = tmp_path / "sweep"
         names = ["seed-1", "seed-2", "seed-3"]
-        client = _sweep_process(["--cells", "60", "--seeds", "1,2,3", "--snapshot-every", "5",
+        client = _sweep_process(["--cells", "600", "--seeds", "1,2,3", "--snapshot-every", "5",
                                  "--scheduler", str(scheduler_file), "--out", str(out)], logs / "sweep.log")
         processes.append(client)
         pids = {w.pid: w for w in workers}
@@ -304,7 +306,7 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
         else:
             assert len(starts) == 1, (name, starts)
     # The continued run is the uninterrupted run.
-    whole = sweep.run_task("whole", Settings(n_cells=60, seed=int(victim.split("-")[1])).to_dict(),
+    whole = sweep.run_task("whole", Settings(n_cells=600, seed=int(victim.split("-")[1])).to_dict(),
                            str(tmp_path / "whole"), 5)
     ours, theirs = RunFolder(out / "runs" / victim).read_history(), RunFolder(tmp_path / "whole").read_history()
     assert ours["max_overlap"] == theirs["max_overlap"] and ours["cells"] == theirs["cells"]
