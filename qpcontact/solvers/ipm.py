@@ -50,8 +50,10 @@ from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, chec
 
 #: Default cap on interior-point iterations.
 MAX_ITERATIONS = 100
-#: Iterations without a new best error after which the method stops (rounding has won).
-STALL_ITERATIONS = 5
+#: Iterations without a new best error after which the method stops (rounding has won). 5 stopped
+#: linearizations of grown 3·10⁴-cell colonies on a plateau the method leaves after 5–6 more
+#: iterations (docs/performance.md, "Failures found at 10⁵ cells").
+STALL_ITERATIONS = 10
 #: Centrality correctors per iteration (Gondzio): each is one more solve with the same factorization.
 CORRECTORS = 1
 #: Fraction of the way to the boundary an iterate may go (keeps it interior).
