@@ -289,11 +289,13 @@ def growth_time_step(colony: Colony, *, growth_per_step: float = 0.05, max_dt: f
     fast). ``still`` is the step when no cell grows.
 
     Raises:
-        InvalidArgumentError: a growth per step, ``max_dt`` or ``still`` that is not a number > 0.
+        InvalidArgumentError: a growth per step, ``max_dt`` or ``still`` that is not a number > 0
+            (``max_dt`` may be infinite).
     """
-    for name, value in (("growth_per_step", growth_per_step), ("max_dt", max_dt), ("still", still)):
-        if isinstance(value, bool) or not (value > 0) or np.isnan(value):
-            raise InvalidArgumentError(f"{name}: must be a number > 0, got {value!r}")
+    growth_per_step = number("growth_per_step", growth_per_step, minimum=0.0, open_minimum=True)
+    still = number("still", still, minimum=0.0, open_minimum=True)
+    if max_dt != np.inf:  # no cap is the default
+        max_dt = number("max_dt", max_dt, minimum=0.0, open_minimum=True)
     rate = float(colony.rates.max(initial=0.0))
     step = float(np.log1p(growth_per_step)) / rate if rate > 0 else float(still)
     return min(float(max_dt), step)

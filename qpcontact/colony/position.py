@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from ..assembly.system import build_system
+from ..checks import number
 from ..errors import InvalidArgumentError, StepFailedError
 from ..geometry.cells import Cells
 from ..geometry.contacts import (
@@ -110,15 +111,8 @@ class PositionSettings:
     tolerance: float = 1e-3
 
     def __post_init__(self) -> None:
-        positive = ["overlap_tolerance", "margin", "trust", "relaxation", "tolerance"]
-        if self.turn_limit is not None:
-            positive.append("turn_limit")
-        for name in [*positive, "aim"]:
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or not (
-                    value > 0 if name in positive else value >= 0):
-                raise InvalidArgumentError(f"{name}: must be a finite number {'> 0' if name in positive else '>= 0'}, "
-                                           f"got {value!r}")
+        for name in ("overlap_tolerance", "margin", "trust", "relaxation", "tolerance", "turn_limit", "aim"):
+            number(name, getattr(self, name), minimum=0.0, open_minimum=name != "aim", allow_none=name == "turn_limit")
         if self.trust > 1:
             raise InvalidArgumentError(f"trust: must be in (0, 1], got {self.trust!r}")
         if not (isinstance(self.max_iterations, int) and not isinstance(self.max_iterations, bool)
@@ -419,6 +413,7 @@ def position_step(
     turn_limited = 0
     converged, message, iteration = False, "", 0
     previous: np.ndarray | None = None  # the impulses of the last kept iterate
+    keys = found.key(n_planes, n)
     backtracks = 0
     for iteration in range(settings.max_iterations + 1):
         now = move(cells, dt, drive + impulses)
@@ -427,8 +422,9 @@ def position_step(
         # diameter against a neighbour within one linearization (measured on a grown colony of
         # 10⁴ cells, with half the margin after the first: 0.14 of a diameter of overlap at the
         # seventh linearization, with a pair found only then).
-        known = found.key(n_planes, n)  # the contacts of the last linearization
+        known = keys  # the contacts of the last linearization
         found = found.union(_detect(now, planes, reach, planar), n_planes, n)
+        keys = found.key(n_planes, n)
         contacts = _evaluate(now, found, planes, planar)
         times["detect"] += time.perf_counter() - t0
         diameter = _diameters(now, contacts)
@@ -438,14 +434,14 @@ def position_step(
         # way. A larger overlap on a contact found only now (a cell pushed far, into a neighbour
         # beyond the search margin) says nothing about the linearization: full updates go on.
         worst = int(np.argmax(-contacts.separation / diameter)) if len(contacts) else -1
-        if len(overlaps) >= 2 and overlaps[-1] > overlaps[-2] and np.isin(found.key(n_planes, n)[worst], known):
+        if len(overlaps) >= 2 and overlaps[-1] > overlaps[-2] and np.isin(keys[worst], known):
             relaxation = 0.5
         # An update that put cells deep into each other (rods crossing: the linearization of a
         # nearly infeasible jam, far outside where it holds) is not kept: back half way to the
         # last iterate and look again (measured: a newborn squeezed in a 27,601-cell colony went
         # from 0.15 to 1.0, rods through each other, and no later linearization separated them).
         if (previous is not None and overlaps[-1] > max(BACKTRACK_OVERLAP, overlaps[-2])
-                and backtracks < MAX_BACKTRACKS):
+                and backtracks < MAX_BACKTRACKS and iteration < settings.max_iterations):
             impulses = previous + 0.5 * (impulses - previous)
             backtracks += 1
             relaxation = 0.5
@@ -453,9 +449,9 @@ def position_step(
             continue
         target = np.zeros(len(contacts))
         if floor_keys.size:
-            keys = found.key(n_planes, n) // 8
-            where = np.minimum(np.searchsorted(floor_keys, keys), floor_keys.size - 1)
-            target = np.where(floor_keys[where] == keys, np.minimum(0.0, floor_value[where]), 0.0)
+            pair = keys // 8
+            where = np.minimum(np.searchsorted(floor_keys, pair), floor_keys.size - 1)
+            target = np.where(floor_keys[where] == pair, np.minimum(0.0, floor_value[where]), 0.0)
         shortfall = (target - contacts.separation) / diameter
         excess = float(np.max(shortfall, initial=0.0))
         # The free motion itself may be within the tolerance (nothing pushes): nothing to solve

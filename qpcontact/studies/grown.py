@@ -29,7 +29,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import resource
 import sys
 import time
@@ -43,6 +42,7 @@ from ..arguments import add_output_arguments, comma_list, positive_float, positi
 from ..colony import Colony, PositionStepResult, Settings, load_colony, run_colony, save_colony
 from ..colony.simulate import step_function
 from ..outputs import atomic_write, describe_written, prepare_folder, write_text
+from .bench import machine_description
 from .harness import guarded
 
 OUTPUTS = ("grown.md", "grown.json", "grown.png")
@@ -149,9 +149,9 @@ def peer_times(log_path: Path, sizes: list[int]) -> dict[str, Any]:
 
 
 def machine() -> str:
+    """:func:`~qpcontact.studies.bench.machine_description` and the load average now."""
     load = os.getloadavg()
-    return (f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, load average "
-            f"{load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min)")
+    return f"{machine_description()}, load average {load[0]:.2f} / {load[1]:.2f} / {load[2]:.2f} (1 / 5 / 15 min)"
 
 
 def _fmt(value: Any, digits: int = 1) -> str:

@@ -179,7 +179,7 @@ def test_settings_and_arguments_are_checked():
         PositionSettings(max_iterations=0)
     with pytest.raises(InvalidArgumentError, match="trust"):
         PositionSettings(trust=2.0)
-    with pytest.raises(InvalidArgumentError, match="aim: must be a finite number >= 0"):
+    with pytest.raises(InvalidArgumentError, match="aim: expected a finite real number in \\[0, inf\\]"):
         PositionSettings(aim=-0.1)
     cells = rods([[0, 0, 0]], [[1, 0, 0]], 2.0)
     with pytest.raises(InvalidArgumentError, match="dt"):
