@@ -162,10 +162,10 @@ def prepare(case: SceneCase) -> Prepared:
 def solve_once(system: ContactSystem, method: Method, tolerance: float, time_limit: float) -> dict[str, Any]:
     """Solve once through :func:`~qpcontact.resolve.solve_system`; returns y, lam, converged,
     status, iterations, setup, solve, message."""
-    y, lam, info = solve_system(system, solver=method.solver, formulation=method.formulation, form=method.form,
-                                tolerance=tolerance, time_limit=time_limit)
-    return {"y": y, "lam": lam, "converged": bool(info["converged"]), "status": info["status"],
-            "iterations": info["iterations"], "setup": info["setup"], "solve": info["solve"], "message": info["message"]}
+    out = solve_system(system, solver=method.solver, formulation=method.formulation, form=method.form,
+                       tolerance=tolerance, time_limit=time_limit)
+    return {"y": out.y, "lam": out.lam, "converged": out.converged, "status": out.status, "iterations": out.iterations,
+            "setup": out.setup_seconds, "solve": out.solve_seconds, "message": out.message}
 
 
 def repeated(system: ContactSystem, method: Method, tolerance: float, time_limit: float, repeats: int) -> dict[str, Any]:
