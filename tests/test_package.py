@@ -68,11 +68,14 @@ def test_the_layout_rule_is_checked_on_the_real_imports():
     assert _wing_of("qpcontact.studies.compare") == "studies" and _wing_of("qpcontact.errors") is None
 
 
-def test_importing_qpcontact_leaves_out_the_studies_and_plotting():
+def test_importing_qpcontact_leaves_out_the_studies_the_baselines_and_plotting():
     code = ("import sys, qpcontact; print(sorted(m for m in sys.modules if m.startswith(('qpcontact.studies', "
-            "'matplotlib', 'tqdm'))))")
+            "'qpcontact.solvers.baselines', 'matplotlib', 'tqdm'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "[]"
+    code = "import qpcontact, sys; qpcontact.get_solver('bbpgd'); print('qpcontact.solvers.baselines' in sys.modules)"
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert loaded.stdout.strip() == "True"  # loaded when asked for by name
 
 
 def test_public_api_of_the_readme_and_the_wings():

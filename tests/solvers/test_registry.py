@@ -36,8 +36,8 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_listing_order_plain_solve_then_built_in_then_every_installed_backend():
     backends = sorted(qpsolvers.available_solvers)
     assert available_solvers() == ["linear", "mprgp", "ipm", *backends]
-    assert available_solvers(include_baselines=True) == ["linear", "cg", "cg_euclidean", "bbpgd", "mprgp", "ipm",
-                                                         *backends]
+    assert available_solvers(include_baselines=True) == ["linear", "mprgp", "ipm", *backends, "cg", "cg_euclidean",
+                                                         "bbpgd"]
     assert set(KNOWN_BACKENDS) <= set(registered_solvers())  # known even when not installed
     assert qc.available_solvers() == available_solvers()
 
