@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -25,8 +23,7 @@ def run_example(name: str, *argv: str) -> int:
 
 
 def test_every_example_is_tested():
-    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "performance_ab",
-              "foreign_state"}
+    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "foreign_state"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -77,13 +74,3 @@ def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
 
     assert main(["simulate", "--model", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
                  "--quiet"]) == 0
-
-
-def test_the_before_after_timing_runs_against_a_checkout():
-    """(It re-imports qpcontact from another folder, so it runs in its own process; here the
-    "old" checkout is this one.)"""
-    done = subprocess.run([sys.executable, str(EXAMPLES / "performance_ab.py"), str(ROOT), "--sizes", "200",
-                           "--dimensions", "2", "--repeats", "1", "--cache-dir", "none", "--solvers", "osqp/contact"],
-                          capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert "| 2D | 200 | detect |" in done.stdout and "| True |" in done.stdout

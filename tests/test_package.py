@@ -106,7 +106,7 @@ def test_documents_name_files_and_tests_that_exist(document):
     module path a document names exists (so that a move cannot leave stale paths behind)."""
     text = document.read_text()
     missing = []
-    for path, test in re.findall(r"\b((?:qpcontact|tests|examples)/[\w/]+\.py)(?:::(\w+))?", text):
+    for path, test in re.findall(r"\b((?:qpcontact|tests|examples|benchmarks)/[\w/]+\.py)(?:::(\w+))?", text):
         if not (ROOT / path).exists():
             missing.append(path)
         elif test and not re.search(rf"def {test}\b", (ROOT / path).read_text()):

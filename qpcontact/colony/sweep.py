@@ -56,11 +56,14 @@ from typing import Any
 
 import numpy as np
 
+from .. import cluster
 from ..arguments import comma_list, non_negative_int, positive_int, run_standalone
-from ..colony.growth import Colony
-from ..colony.hooks import Hook, load_hook
-from ..colony.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
-from ..colony.simulate import (
+from ..errors import InvalidArgumentError, OutputFolderError, QPContactError
+from ..outputs import describe_written, prepare_folder, write_csv, write_text
+from .growth import Colony
+from .hooks import Hook, load_hook
+from .runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
+from .simulate import (
     RUN_OPTION_NAMES,
     SETTING_FLAGS,
     RunOptions,
@@ -71,11 +74,7 @@ from ..colony.simulate import (
     run_colony,
     updated,
 )
-from ..colony.snapshots import load_snapshot
-from ..errors import InvalidArgumentError, OutputFolderError, QPContactError
-from ..outputs import describe_written, prepare_folder, write_text
-from . import cluster
-from .harness import write_csv
+from .snapshots import load_snapshot
 
 SWEEP_FILE = "sweep.json"
 SUMMARY_FILE = "summary.csv"

@@ -1,4 +1,4 @@
-"""qpcontact sweep (qpcontact.studies.sweep) and the Dask helpers (qpcontact.studies.cluster): the
+"""qpcontact sweep (qpcontact.colony.sweep) and the Dask helpers (qpcontact.cluster): the
 grid and its checks before anything starts, a small sweep on a 2-worker local cluster, failed runs
 reported by name, a stopped sweep resumed, a killed worker, and compare/stability on Dask with
 their time limits kept. The runs are tiny (10-60 cells, a few seconds each)."""
@@ -17,12 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qpcontact import cli
+from benchmarks.sweep_benchmark import wait_for
+from qpcontact import cli, cluster
+from qpcontact.colony import sweep
 from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
 from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.errors import InvalidArgumentError
-from qpcontact.studies import cluster, harness, sweep
-from qpcontact.studies.sweep_benchmark import wait_for
+from qpcontact.studies import harness
 
 distributed = pytest.importorskip("distributed")
 
