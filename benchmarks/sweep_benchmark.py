@@ -49,8 +49,8 @@ def one_after_the_other(cells: int, runs: int, out: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     for seed in range(1, runs + 1):
         t = time.perf_counter()
-        outcome = sweep.run_task(f"seed-{seed}", Settings(n_cells=cells, seed=seed).to_dict(),
-                                 str(out / "runs" / f"seed-{seed}"), 100)
+        outcome = sweep.run_task(f"seed-{seed}", Settings().updated({"cells": cells, "seed": seed}).to_tables(),
+                                 str(out / "runs" / f"seed-{seed}"))
         if outcome["status"] != "done":
             raise RuntimeError(f"run seed-{seed} failed: {outcome['error']}")
         seconds.append(time.perf_counter() - t)

@@ -72,5 +72,5 @@ def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
     assert run_example("model_hook", "--cells", "6", "--out", str(tmp_path / "script")) == 0
     from qpcontact.cli import main
 
-    assert main(["simulate", "--model", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
+    assert main(["simulate", "--hook", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
                  "--quiet"]) == 0

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import qpcontact as q
+from qpcontact.colony import settings as settings_module
 from qpcontact.colony import simulate
 from qpcontact.colony.snapshots import load_colony
 from qpcontact.errors import InvalidArgumentError
@@ -29,23 +30,25 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"cfl": -1.0}, "cfl: must be finite and > 0"),
-    ({"overlap_limit": float("nan")}, "overlap_limit: must be finite and >= 0"),
-    ({"n_cells": 0}, "n_cells: must be an integer >= 1"),
-    ({"dimensions": 4}, "dimensions: must be 2 or 3"),
-    ({"position_correction": 1.5}, r"position_correction: must be in \[0, 1\]"),
+    ({"cfl": -1.0}, "cfl: expected a number > 0, got -1.0"),
+    ({"velocity_overlap_limit": float("nan")}, "velocity_overlap_limit: expected a finite number"),
+    ({"cells": 0}, "cells: expected an integer >= 1, got 0"),
+    ({"dimensions": 4}, "dimensions: expected one of 2, 3, got 4"),
+    ({"velocity_position_correction": 1.5}, r"velocity_position_correction: expected a number in \[0, 1\]"),
+    ({"position_tolerance": 2.0}, r"position_tolerance: expected a number in \(0, 1\)"),
+    ({"division_length": 0.5}, "division_length: must exceed 2 × radius = 1 µm"),
 ])
 def test_simulate_settings_are_checked(change, message):
     from qpcontact.colony.simulate import Settings
 
     with pytest.raises(InvalidArgumentError, match=message):
-        Settings(**change)
+        Settings().updated(change)
 
 
 def test_largest_overlap_stays_bounded_over_a_2d_run_with_position_correction():
     from qpcontact.colony.simulate import Settings, run_colony
 
-    run = run_colony(Settings(n_cells=150), progress=False)
+    run = run_colony(Settings().updated({"cells": 150}), progress=False)
     assert not run.error
     assert run.colony.cells.n >= 150
     assert len(run.history["max_overlap"]) > 100
@@ -69,7 +72,8 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
     plain, _, dt_plain, rejected_plain = grow_with_retries(colony, 0.1, Settings(), **options)
     assert (dt_plain, rejected_plain) == (0.1, 0)
     assert largest_overlap(plain.cells) == pytest.approx(0.5, abs=1e-9)
-    limited, _, dt_limited, rejected = grow_with_retries(colony, 0.1, Settings(overlap_limit=0.1), **options)
+    limited, _, dt_limited, rejected = grow_with_retries(colony, 0.1, Settings().updated({"velocity_overlap_limit": 0.1}),
+                                                         **options)
     assert (dt_limited, rejected) == (0.05, 1)
     assert largest_overlap(limited.cells) <= 1e-9
 
@@ -78,14 +82,14 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
 def test_the_time_step_follows_the_expansion_of_a_colony_of_the_runs_dimensions(dimensions, monkeypatch):
     """3D runs used to size their step as 2D (expansion_time_step's dimensions were never passed)."""
     passed = []
-    real = simulate.expansion_time_step
+    real = settings_module.expansion_time_step
 
     def spy(colony, **kwargs):
         passed.append(kwargs.get("dimensions"))
         return real(colony, **kwargs)
 
-    monkeypatch.setattr(simulate, "expansion_time_step", spy)
-    settings = simulate.Settings(n_cells=2, dimensions=dimensions, max_steps=3, step="velocity")
+    monkeypatch.setattr(settings_module, "expansion_time_step", spy)
+    settings = simulate.Settings().updated({"cells": 2, "dimensions": dimensions, "max_steps": 3, "step": "velocity"})
     run = simulate.run_colony(settings, progress=False)
     assert not run.error and passed == [dimensions] * run.steps
 
