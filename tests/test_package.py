@@ -163,6 +163,19 @@ def test_scs_is_an_extra_not_a_base_dependency():
     assert {"solvers", "vtk", "docs", "test"} <= set(re.findall(r"\w+", project["optional-dependencies"]["all"][0]))
 
 
+def test_the_quick_start_installs_neither_vtk_nor_the_linters():
+    """pip install -e ".[all]" made a 1.3 GB environment, 566 MB of it VTK for the tests; the
+    quick start (.[all], then the tests) must stay under 700 MB (measured: docs/architecture.md)."""
+    import tomllib
+
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    included = set(re.findall(r"\w+", extras["all"][0])) - {"qpcontact"}
+    packages = {re.split(r"[<>=\[ ]", d)[0].lower() for extra in included for d in extras[extra]}
+    assert not packages & {"vtk", "ruff", "mypy"}, packages
+    assert "lint" not in included and {"ruff", "mypy"} <= {re.split(r"[<>=]", d)[0] for d in extras["lint"]}
+    assert '.[all,lint]' in (ROOT / ".ci" / "run").read_text()
+
+
 @pytest.mark.slow
 def test_the_api_reference_builds_from_the_docstrings(tmp_path):
     pytest.importorskip("pdoc", reason="the API reference needs the extra qpcontact[docs]")
