@@ -126,6 +126,38 @@ def test_documents_name_files_and_tests_that_exist(document):
     assert not missing, f"{document.name} names what does not exist: {sorted(set(missing))}"
 
 
+def architecture_tree() -> set[str]:
+    """The package's modules that docs/architecture.md's tree lists: each line is an entry (a
+    name, or names separated by commas, indented two spaces a level) and its description after
+    two spaces; lines indented to the description column continue a description."""
+    block = (ROOT / "docs" / "architecture.md").read_text().split("```\n", 2)[1]
+    listed, folders = set(), []
+    for line in block.splitlines():
+        indent = len(line) - len(line.lstrip(" "))
+        if indent >= 20 or not line.strip():
+            continue
+        names = re.match(r"([\w./]+(?:, [\w./]+)*)(?:\s{2,}|$)", line.strip())
+        assert names, f"not an entry of the tree: {line!r}"
+        del folders[indent // 2:]
+        for name in names.group(1).split(", "):
+            if name.endswith("/"):
+                folders.append(name.rstrip("/"))
+            elif folders and folders[0] == "qpcontact":
+                listed.add("/".join([*folders, name]))
+    return listed
+
+
+def test_the_architecture_tree_lists_every_module_and_only_those():
+    """docs/architecture.md's tree is the package: a module added, moved or removed without it
+    fails here (the sub-packages' __init__.py are their folder lines)."""
+    modules = {str(p.relative_to(ROOT)) for p in PACKAGE.rglob("*.py")
+               if p.name != "__init__.py" or p.parent == PACKAGE}
+    listed = architecture_tree()
+    assert not modules - listed, f"modules missing from docs/architecture.md: {sorted(modules - listed)}"
+    assert not listed - modules, f"docs/architecture.md lists modules that do not exist: {sorted(listed - modules)}"
+    assert {"qpcontact/described.py", "qpcontact/colony/settings.py", "qpcontact/colony/sweep.py"} <= listed
+
+
 def test_cli_lists_commands_and_rejects_unknown_ones(capsys):
     assert cli.main(["--help"]) == 0
     listing = capsys.readouterr().out
