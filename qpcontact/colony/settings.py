@@ -1,15 +1,14 @@
 """The settings of a colony run (``qpcontact simulate``, ``qpcontact sweep``, :func:`run_colony`),
 nested by concern, each described once with its unit (:func:`qpcontact.described.setting`):
 
-============  ======================  ==================  =============================================
-table         class                   flags               what
-============  ======================  ==================  =============================================
-``[model]``   :class:`ModelSettings`  ``--radius``, ...   the cells and how they grow
-``[run]``     :class:`RunSettings`    ``--cells``, ...    size, dimensions, seed, the step, the time step
-``[output]``  :class:`OutputSettings` ``--vtk``, ...      what the run writes besides history and state
-``[position]`` :class:`~qpcontact.colony.PositionSettings`  ``--position-*``  the position-level step
-``[velocity]`` :class:`VelocitySettings`  ``--velocity-*``  the velocity-level step
-============  ======================  ==================  =============================================
+- ``[model]``, :class:`ModelSettings` (flags ``--radius``, ...): the cells and how they grow;
+- ``[run]``, :class:`RunSettings` (``--cells``, ...): size, dimensions, seed, the step, the time
+  step;
+- ``[output]``, :class:`OutputSettings` (``--snapshot-every``, ``--vtk``, ``--gif``): what a run
+  writes besides its history and last state;
+- ``[position]``, :class:`~qpcontact.colony.PositionSettings` (``--position-*``): the
+  position-level step;
+- ``[velocity]``, :class:`VelocitySettings` (``--velocity-*``): the velocity-level step.
 
 :class:`Settings` holds one of each. Everything users see is generated from the descriptions
 (:mod:`qpcontact.described`): the flags of ``simulate`` and ``sweep`` (:func:`add_setting_flags`),
