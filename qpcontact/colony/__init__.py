@@ -26,6 +26,7 @@
 Imports the geometry, assembly, solvers and resolve wings only.
 """
 
+from ..geometry.motion import rotate
 from .growth import (
     Colony,
     divide,
@@ -38,15 +39,15 @@ from .growth import (
     volumes,
 )
 from .hooks import StepControl, push
-from .position import ContactImpulses, PositionSettings, PositionStepResult, move, position_step
+from .position import CellMotion, ContactImpulses, PositionSettings, PositionStepResult, move, position_step
 from .runs import RunFolder
 from .settings import ModelSettings, OutputSettings, RunSettings, Settings, VelocitySettings
 from .simulate import Run, StepOutcome, run_colony
 from .snapshots import Snapshot, load_colony, load_snapshot, save_colony
-from .step import StepResult, advance, largest_overlap, overlap_fractions, rotate, step
+from .step import StepResult, advance, largest_overlap, overlap_fractions, step
 
 __all__ = [
-    "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings", "PositionStepResult", "Run",
+    "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings", "PositionStepResult", "Run",
     "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
     "StepControl", "StepOutcome", "StepResult", "advance", "divide", "expansion_time_step", "grow", "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",

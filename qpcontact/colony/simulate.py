@@ -67,7 +67,7 @@ from ..errors import InvalidArgumentError, ModelHookError, SolverFailedError, St
 from ..geometry import Cells, capsule_volume
 from .growth import Colony, divide, grow, grow_position
 from .hooks import Hook, apply_hook, load_hook, push
-from .position import ContactImpulses, PositionStepResult
+from .position import CellMotion, ContactImpulses, PositionStepResult
 from .runs import HISTORY_FIELDS, Interrupt, RunFolder, is_inside, latest_snapshot, read_toml
 from .settings import (
     Settings,
@@ -196,12 +196,14 @@ def step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunct
 
 #: The extra arrays of the position step's warm start (:class:`~qpcontact.colony.ContactImpulses`).
 WARM_ARRAYS = ("a", "b", "kind", "impulse")
+#: The extra arrays of the position step's predictor (:class:`~qpcontact.colony.CellMotion`).
+MOTION_ARRAYS = ("ids", "velocity", "turning")
 
 
 def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunction:
     """The position-level step of a run (:func:`qpcontact.colony.grow_position`): the substrate
-    in 3D, the planar unknowns in 2D, the contact impulses of each step kept in ``extra`` as the
-    next one's warm start (and so restored on resume). A step that does not reach the overlap
+    in 3D, the planar unknowns in 2D, the contact impulses and the cells' motion of each step kept
+    in ``extra`` as the next one's warm start and predictor (and so restored on resume). A step that does not reach the overlap
     tolerance is retried with half the step, up to ``run.max_halvings`` times; the last failure
     is raised (:class:`~qpcontact.errors.StepFailedError`), never applied."""
     position, halvings = settings.position, settings.run.max_halvings
@@ -210,16 +212,18 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> 
 
     def take_step(colony: Colony, dt: float, *, drive: np.ndarray | None = None) -> StepOutcome:
         warm = ContactImpulses(*(extra[f"warm.{name}"] for name in WARM_ARRAYS)) if "warm.a" in extra else None
+        motion = CellMotion(*(extra[f"motion.{name}"] for name in MOTION_ARRAYS)) if "motion.ids" in extra else None
         for attempt in range(halvings + 1):
             try:
                 grown, out = grow_position(colony, dt, drive=drive, planes=planes, planar=True if planar else None,
-                                           settings=position, warm=warm)
+                                           settings=position, warm=warm, motion=motion)
             except StepFailedError:
                 if attempt == halvings:
                     raise
                 dt /= 2.0
                 continue
             extra.update({f"warm.{name}": getattr(out.warm, name) for name in WARM_ARRAYS})
+            extra.update({f"motion.{name}": getattr(out.motion, name) for name in MOTION_ARRAYS})
             return StepOutcome(grown, out, dt, attempt)
         raise AssertionError("unreachable")
 
