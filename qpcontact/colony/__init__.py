@@ -4,6 +4,10 @@
   move) and its helpers;
 - :mod:`.position`: :func:`position_step`, the step with non-penetration at the end of the
   step (sequential linearization; the default of ``qpcontact simulate``);
+- :mod:`.mechanics`: contact forces as mechanics: :func:`cell_forces`, :func:`cell_stress`,
+  :func:`cell_pressure` (virial stress and pressure of each cell), :class:`CellMechanics`,
+  :func:`radial_profile`, :func:`fit_parabola`, growth slowed by pressure
+  (:func:`pressure_growth_rate`, :class:`PressureGrowth`);
 - :mod:`.growth`: :class:`Colony` (cells with lineage), :func:`grow` (velocity-level step) and
   :func:`grow_position` (position-level step), :func:`divide`, the time-step rules
   :func:`growth_time_step` and :func:`expansion_time_step`;
@@ -33,6 +37,16 @@ from .growth import (
     volumes,
 )
 from .hooks import StepControl, push
+from .mechanics import (
+    CellMechanics,
+    PressureGrowth,
+    cell_forces,
+    cell_pressure,
+    cell_stress,
+    fit_parabola,
+    pressure_growth_rate,
+    radial_profile,
+)
 from .position import ContactImpulses, PositionSettings, PositionStepResult, move, position_step
 from .runs import RunFolder
 from .simulate import Run, Settings, StepOutcome, run_colony
@@ -40,7 +54,8 @@ from .snapshots import Snapshot, load_colony, load_snapshot, save_colony
 from .step import StepResult, advance, largest_overlap, overlap_fractions, rotate, step
 
 __all__ = [
-    "Colony", "ContactImpulses", "PositionSettings", "PositionStepResult", "Run", "RunFolder", "Settings", "Snapshot",
+    "CellMechanics", "Colony", "ContactImpulses", "PressureGrowth", "cell_forces", "cell_pressure", "cell_stress",
+    "fit_parabola", "pressure_growth_rate", "radial_profile", "PositionSettings", "PositionStepResult", "Run", "RunFolder", "Settings", "Snapshot",
     "StepControl", "StepOutcome", "StepResult", "advance", "divide", "expansion_time_step", "grow", "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",
     "overlap_fractions", "position_step", "push", "rotate", "run_colony", "save_colony", "step", "volumes",
