@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from qpcontact.cli import main
-from qpcontact.colony.paraview import ARRAYS, read_series
+from qpcontact.colony.paraview import ARRAYS, MECHANICS_ARRAYS, read_series
 from qpcontact.colony.snapshots import load_snapshot
 
 meshio = pytest.importorskip("meshio", reason="ParaView files need the extra qpcontact[vtk]")
@@ -21,10 +21,12 @@ def run_3d(tmp_path_factory):
     return out
 
 
-def expected(colony):
+def expected(snapshot):
+    colony, mechanics = snapshot.colony, snapshot.mechanics
     cells = colony.cells
     return {"axis": cells.axes, "length": cells.lengths, "radius": cells.radii, "id": colony.ids,
-            "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities}
+            "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities,
+            "pressure": mechanics.pressure, "stress": mechanics.stress.reshape(cells.n, 9)}
 
 
 def test_a_3d_run_writes_a_vtu_per_snapshot_and_a_time_series(run_3d):
@@ -33,7 +35,8 @@ def test_a_3d_run_writes_a_vtu_per_snapshot_and_a_time_series(run_3d):
     assert [f.name for _, f in series] == [s.name.replace(".npz", ".vtu") for s in snapshots]
     assert len(series) >= 2
     for (time, vtu), npz in zip(series, snapshots, strict=True):
-        colony = load_snapshot(npz).colony
+        snapshot = load_snapshot(npz)
+        colony = snapshot.colony
         assert time == colony.time
         mesh = meshio.read(vtu)
         n = colony.cells.n
@@ -42,8 +45,9 @@ def test_a_3d_run_writes_a_vtu_per_snapshot_and_a_time_series(run_3d):
         np.testing.assert_allclose(mesh.points[n:].reshape(n, 2, 3), np.stack([colony.cells.centers - half,
                                                                                 colony.cells.centers + half], axis=1))
         assert [(block.type, len(block.data)) for block in mesh.cells] == [("vertex", n), ("line", n)]
-        assert sorted(mesh.point_data) == sorted(ARRAYS)
-        for name, values in expected(colony).items():
+        assert sorted(mesh.point_data) == sorted(ARRAYS + MECHANICS_ARRAYS)
+        assert not snapshot.mechanics.planar and snapshot.mechanics.pressure.max() > 0  # 3D: per volume
+        for name, values in expected(snapshot).items():
             np.testing.assert_allclose(mesh.point_data[name][:n], values, err_msg=name)
             np.testing.assert_allclose(mesh.point_data[name][n:], np.repeat(values, 2, axis=0), err_msg=name)
             np.testing.assert_allclose(mesh.cell_data[name][1], values, err_msg=name)
@@ -60,8 +64,9 @@ def test_vtks_own_reader_reads_the_files(run_3d):
         n = meshio.read(vtu).cells[0].data.shape[0]
         assert (grid.GetNumberOfPoints(), grid.GetNumberOfCells()) == (3 * n, 2 * n)
         data = grid.GetPointData()
-        assert sorted(data.GetArrayName(i) for i in range(data.GetNumberOfArrays())) == sorted(ARRAYS)
+        assert sorted(data.GetArrayName(i) for i in range(data.GetNumberOfArrays())) == sorted(ARRAYS + MECHANICS_ARRAYS)
         assert data.GetArray("axis").GetNumberOfComponents() == 3
+        assert data.GetArray("stress").GetNumberOfComponents() == 9  # a tensor, to ParaView
 
 
 def test_a_resumed_run_keeps_the_earlier_entries_of_the_series(tmp_path):
