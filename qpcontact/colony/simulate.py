@@ -24,10 +24,18 @@ Outputs in ``--out`` (default ``./simulate-out``), checked before the run starts
   every ``--snapshot-every`` steps and the last state, written atomically, each enough to
   continue the run exactly (``--resume``);
 - ``history.csv``: one row per step, appended as the step completes (time, dt, cells, contacts,
-  largest/mean overlap as a fraction of the diameter, solver seconds, step seconds, residuals);
-- ``colony.png`` (cells coloured by orientation; a side view too in 3D), ``history.png`` (cell
-  count, overlap, solver time and residual against time), with ``--gif`` an animation
-  ``colony.gif``, with ``--vtk`` ParaView files (``colony.pvd``, ``vtk/step_NNNNNN.vtu``).
+  largest/mean overlap as a fraction of the diameter, solver seconds, step seconds, residuals,
+  mean and largest cell pressure);
+- ``colony.png`` (cells coloured by orientation, or by pressure; a side view too in 3D),
+  ``history.png`` (cell count, overlap, solver time and residual against time), in 2D
+  ``pressure.png`` (the radial pressure profile), with ``--gif`` an animation ``colony.gif``, with
+  ``--vtk`` ParaView files (``colony.pvd``, ``vtk/step_NNNNNN.vtu``).
+
+Every snapshot (and ParaView file) carries each cell's pressure and stress over the step that
+led to it (:mod:`qpcontact.colony.mechanics`; :func:`step_mechanics`), from the contact forces
+of the step: in 2D per footprint area [force/µm], in 3D per volume [force/µm²], where the force
+unit is the drive's (mass·µm/doubling time, masses = volumes in µm³: a free cell of volume V
+driven by a force f moves at f/V µm per doubling time).
 
 A step whose contact solve fails is never applied: the run stops there, says why, saves what
 it has and exits with status 1. Ctrl-C (or SIGTERM) stops the run cleanly: the state reached,
@@ -58,13 +66,14 @@ from ..geometry.surfaces import substrate
 from ..solvers import FORMS, QP_FORMULATIONS, available_solvers, get_solver
 from .growth import Colony, divide, expansion_time_step, grow, grow_position, growth_time_step
 from .hooks import Hook, apply_hook, load_hook, push
+from .mechanics import CellMechanics, PressureGrowth
 from .position import ContactImpulses, PositionSettings, PositionStepResult
 from .runs import HISTORY_FIELDS, Interrupt, RunFolder, is_inside, latest_snapshot, read_toml
 from .snapshots import Snapshot, load_snapshot
 from .step import StepResult, largest_overlap
 
 __all__ = ["HISTORY_FIELDS", "Run", "Settings", "StepOutcome", "founder", "grow_with_retries", "run_colony",
-           "step_function", "turning_reach"]
+           "step_function", "step_mechanics", "turning_reach"]
 
 
 @dataclass
@@ -280,6 +289,8 @@ class Run:
         first_step: the step index this call started from.
         interrupted: the signal that stopped the run (``signal.SIGINT`` for Ctrl-C), or None.
         exception: the exception behind ``error``, if any (a model hook's has its traceback).
+        mechanics: the pressure and stress of ``colony``'s cells over the last step
+            (:func:`step_mechanics`).
     """
 
     colony: Colony
@@ -291,6 +302,7 @@ class Run:
     first_step: int = 0
     interrupted: int | None = None
     exception: BaseException | None = None
+    mechanics: CellMechanics | None = None
 
 
 def founder(settings: Settings) -> Colony:
@@ -395,15 +407,19 @@ def initial_state(settings: Settings, start: Colony | Snapshot | None) -> tuple[
     return start.colony, max(start.step, 0), rng, dict(start.extra)
 
 
-def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float) -> dict[str, Any]:
+def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float,
+                mechanics: CellMechanics | None = None) -> dict[str, Any]:
     """One row of the history (:data:`HISTORY_FIELDS`): the step's index, the state after it and
     what the step did. ``max_overlap``/``mean_overlap``: the velocity-level step's are those of
     the state it starts from; the position step's those of the state it ends in (its
     ``penetration`` is its largest shortfall below a contact's target, its ``complementarity``
-    is not measured)."""
+    is not measured). ``mean_pressure``/``max_pressure``: over the cells of the end of the step
+    (before division), from ``mechanics`` (:func:`step_mechanics`; NaN without)."""
     out = outcome.result
+    pressure = np.array([np.nan]) if mechanics is None else mechanics.pressure
     common = dict(step=step, time=colony.time, dt=outcome.dt, cells=colony.cells.n, step_seconds=seconds,
-                  rejected=outcome.rejected)
+                  rejected=outcome.rejected, mean_pressure=float(np.mean(pressure)) if pressure.size else 0.0,
+                  max_pressure=float(np.max(pressure, initial=0.0)) if pressure.size else 0.0)
     if isinstance(out, PositionStepResult):
         overlapping = -out.contacts.separation[out.contacts.separation < 0]
         diameter = 2.0 * float(np.median(colony.cells.radii))
@@ -418,9 +434,27 @@ def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float)
                 complementarity=result.errors.get("complementarity", np.nan), linearizations=1)
 
 
+def step_mechanics(outcome: StepOutcome, settings: Settings) -> CellMechanics:
+    """The pressure and stress of the cells at the end of a step (``outcome.colony``, before
+    division) from the step's contact forces (:mod:`qpcontact.colony.mechanics`; 2D stress and
+    pressure for ``dimensions`` 2).
+
+    The position step's forces are its ``contact_forces``. The velocity step's contact impulses
+    are read as forces the same way (overdamped, a cell moves by ``dt·W·(drive + impulses)``;
+    inertial, the impulse over the step ``/dt``); its contacts are those of the start of the step
+    and its impulses include the push that clears overlap (position correction)."""
+    out, planar, cells = outcome.result, settings.dimensions == 2, outcome.colony.cells
+    if isinstance(out, PositionStepResult):
+        return CellMechanics.of(cells, out.contacts, out.contact_forces, planar=planar)
+    contacts, impulses = out.result.contacts, out.result.contact_impulses
+    forces = np.zeros(len(contacts)) if impulses is None else impulses / (outcome.dt if settings.dynamics == "inertial"
+                                                                           else 1.0)
+    return CellMechanics.of(cells, contacts, forces, planar=planar)
+
+
 def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, progress: bool = True,
                folder: RunFolder | None = None, snapshot_every: int = 0, frame_growth: float = 0.0,
-               hook: Hook | None = None) -> Run:
+               hook: Hook | None = None, pressure_growth: PressureGrowth | None = None) -> Run:
     """Grow a colony until it has ``settings.n_cells`` cells (or reaches step ``max_steps``).
 
     Args:
@@ -437,6 +471,9 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
         frame_growth: keep a frame for an animation whenever the cell count has grown by this
             factor since the last frame (0: no frames).
         hook: a model hook (:mod:`qpcontact.colony.hooks`); default: ``settings.model``'s.
+        pressure_growth: growth slowed by each cell's pressure of the step before
+            (:class:`~qpcontact.colony.PressureGrowth`), applied after the hook; None: off (the
+            run is then what it was without this option, bit for bit).
 
     Returns:
         A :class:`Run`. A failed contact solve, a step that cannot be taken (a cell compressed
@@ -452,6 +489,9 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
         hook = load_hook(settings.model)
     take_step = step_function(settings, extra)  # the run's one step function (swap it here)
     planar = settings.dimensions == 2
+    stored = start.mechanics if isinstance(start, Snapshot) else None
+    # The cells' pressure and stress over the step that led to `colony` (saved with it).
+    mechanics = stored if stored is not None and stored.planar == planar else CellMechanics.zero(colony.cells.n, planar)
     history: dict[str, list[float]] = {name: [] for name in HISTORY_FIELDS}
     frames = [(colony.time, colony.cells)] if frame_growth else []
     bar = tqdm(total=settings.n_cells, initial=colony.cells.n, unit="cell", disable=not progress, file=sys.stderr)
@@ -461,7 +501,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     def save() -> None:
         nonlocal saved
         if folder is not None and saved != step:
-            folder.save_snapshot(colony, step, settings=settings.to_dict(), rng=rng, extra=extra)
+            folder.save_snapshot(colony, step, settings=settings.to_dict(), rng=rng, extra=extra, mechanics=mechanics)
             saved = step
 
     t_start = time.perf_counter()
@@ -472,13 +512,20 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             t0 = time.perf_counter()
             try:
                 with interrupt.armed():  # a signal now abandons the step: nothing of it is applied
-                    control = apply_hook(hook, colony, step)
+                    control = apply_hook(hook, colony, step, mechanics)
                     current = colony if control.colony is None else control.colony
-                    dt = settings.time_step_of(current)
+                    stepping = current
+                    if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
+                        felt = mechanics if current is colony else mechanics.carried_over(colony, current)
+                        stepping = current.replace(rates=pressure_growth.rates(current, felt))
+                    dt = settings.time_step_of(stepping)
                     drive = push(current, [0.0, 0.0, -settings.sink_speed]) if not planar and settings.sink_speed else None
                     if control.drive is not None:
                         drive = control.drive if drive is None else drive + control.drive
-                    outcome = take_step(current, dt, drive=drive)
+                    outcome = take_step(stepping, dt, drive=drive)
+                    if stepping is not current:
+                        outcome = outcome._replace(colony=outcome.colony.replace(rates=current.rates))
+                    felt_now = step_mechanics(outcome, settings)
                     divided = divide(outcome.colony, settings.division_length if control.division_length is None
                                      else control.division_length, rng, axis_noise=settings.axis_noise,
                                      rate_noise=settings.rate_noise, base_rate=settings.rate, planar=planar)
@@ -497,8 +544,8 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
                 error, exception = f"{where}: step not applied: {exc}", exc
                 break
-            colony = divided
-            row = history_row(step, colony, outcome, time.perf_counter() - t0)
+            colony, mechanics = divided, felt_now.carried_over(outcome.colony, divided)
+            row = history_row(step, colony, outcome, time.perf_counter() - t0, felt_now)
             for name in HISTORY_FIELDS:
                 history[name].append(row[name])
             if folder is not None:
@@ -515,7 +562,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
         save()  # the state reached, whatever ended the run
     if frame_growth and frames[-1][1] is not colony.cells:
         frames.append((colony.time, colony.cells))
-    return Run(colony, history, wall, step, error, frames, first_step, interrupt.signal, exception)
+    return Run(colony, history, wall, step, error, frames, first_step, interrupt.signal, exception, mechanics)
 
 
 # ------------------------------------------------------------------------------------------
@@ -714,16 +761,37 @@ def run_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bool) -> None:
-    """``colony.png`` (and a side view in 3D), ``history.png`` of the whole run (earlier
-    attempts of a resumed run included), ``colony.gif`` from this run's frames."""
-    from .plots import animate, plot_history, save_colony_picture  # matplotlib only when drawing
+#: What ``colony.png`` can colour the cells by (:func:`draw_pictures`).
+COLORS = ("orientation", "pressure")
 
+
+def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bool, color: str = "orientation") -> None:
+    """``colony.png`` (and a side view in 3D), coloured by the cells' orientation or, with
+    ``color="pressure"``, by their pressure of the last step (:attr:`Run.mechanics`, with a colour
+    bar in its units); ``history.png`` of the whole run (earlier attempts of a resumed run
+    included); in 2D ``pressure.png``, the radial pressure profile
+    (:func:`~qpcontact.colony.plots.plot_pressure_profile`); ``colony.gif`` from this run's
+    frames.
+
+    Raises:
+        InvalidArgumentError: ``color`` is not one of :data:`COLORS`.
+    """
+    from .plots import animate, plot_history, plot_pressure_profile, pressure_label, save_colony_picture
+
+    if color not in COLORS:
+        raise InvalidArgumentError(f"color: expected one of {', '.join(COLORS)}, got {color!r}")
     label = f"{settings.dimensions}D, {settings.solver}/{settings.formulation}, tol {settings.tolerance:g}"
-    cells = result.colony.cells
-    folder.note(save_colony_picture(folder.path / "colony.png", cells,
-                                    f"{cells.n} cells at t = {result.colony.time:.2f} doubling times ({label})",
-                                    side_view=settings.dimensions == 3, planes=settings.step_options()["planes"]))
+    cells, planar = result.colony.cells, settings.dimensions == 2
+    mechanics = result.mechanics or CellMechanics.zero(cells.n, planar)
+    when = f"{cells.n} cells at t = {result.colony.time:.2f} doubling times"
+    by_pressure = color == "pressure"
+    folder.note(save_colony_picture(folder.path / "colony.png", cells, f"{when} ({label})",
+                                    side_view=settings.dimensions == 3, planes=settings.step_options()["planes"],
+                                    values=mechanics.pressure if by_pressure else None,
+                                    value_label=pressure_label(planar) if by_pressure else ""))
+    if planar and cells.n:
+        folder.note(plot_pressure_profile(folder.path / "pressure.png", cells, mechanics.pressure,
+                                          f"{when}: pressure over the last step"))
     history = folder.read_history()
     if history["step"]:
         folder.note(plot_history(folder.path / "history.png", history, label))
