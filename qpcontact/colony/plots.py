@@ -97,6 +97,7 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     # Cells farther from the viewer are drawn first: the top layer of a 3D biofilm from above,
     # the front row (small y) from the side.
     order = np.argsort(cells.centers[:, k] if view == "top" else -cells.centers[:, k], kind="stable")
+    edges = 0.2
     if values is None:
         colour, cmap, limits = np.degrees(np.arctan2(cells.axes[:, 1], cells.axes[:, 0])) % 180.0, "twilight", (0.0, 180.0)
         label = ORIENTATION_LABEL
@@ -105,10 +106,14 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
         if colour.shape != (cells.n,):
             raise InvalidArgumentError(f"values: expected one number per cell ({cells.n}), got shape {colour.shape}")
         finite = colour[np.isfinite(colour)]
-        limits = (float(finite.min(initial=0.0)), float(finite.max(initial=0.0)))
+        # The top of the scale at the 99th percentile of many cells: a few cells on a force chain
+        # would otherwise leave the others in the dark end of the map (the colour bar says so).
+        top = float(np.percentile(finite, 99)) if finite.size >= 100 else float(finite.max(initial=0.0))
+        limits = (float(finite.min(initial=0.0)), top)
         limits = limits if limits[1] > limits[0] else (limits[0], limits[0] + 1.0)
+        edges = 0.2 if cells.n <= 1000 else 0.0  # outlines of thousands of cells hide their colours
     polys = PolyCollection(list(capsule_outlines(cells, view)[order]), array=colour[order], cmap=cmap,
-                           edgecolors="k", linewidths=0.2)
+                           edgecolors="k", linewidths=edges)
     polys.set_clim(*limits)
     ax.add_collection(polys)
     ax.set_aspect("equal")
@@ -120,8 +125,14 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     if title:
         ax.set_title(title)
     if colorbar and ax.figure is not None:
-        ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8)
+        ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8, extend=_beyond(polys))
     return polys
+
+
+def _beyond(polys: PolyCollection) -> str:
+    """The colour bar's ``extend``: "max" when some cells lie above the top of the scale."""
+    values = np.asarray(polys.get_array(), dtype=float)
+    return "max" if values.size and np.nanmax(values) > polys.get_clim()[1] else "neither"
 
 
 def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None, *, side_view: bool = False,
@@ -149,7 +160,8 @@ def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None
         side.set_xlim(*x_range)
         side.set_ylim(bottom, bottom + height)
         top.get_gridspec().set_height_ratios([top.get_ylim()[1] - top.get_ylim()[0], height])
-        fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label, shrink=0.8)
+        fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label, shrink=0.8,
+                     extend=_beyond(polys))
     x_range, y_range = top.get_xlim(), top.get_ylim()
     ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
     fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))
