@@ -37,7 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -280,7 +280,8 @@ class PressureGrowth:
         return pressure_growth_rate(colony.rates, mechanics.pressure, law=self.law, stall_pressure=self.stall_pressure)
 
 
-class RadialProfile(NamedTuple):
+@dataclass(frozen=True)
+class RadialProfile:
     """Values of a colony's cells binned by distance from the colony's centre
     (:func:`radial_profile`).
 
@@ -331,7 +332,8 @@ def radial_profile(cells: Cells, values: Any, *, bins: int = 20, center: Sequenc
     return RadialProfile(edges, radius, mean, np.sqrt(spread), count, middle)
 
 
-class ParabolaFit(NamedTuple):
+@dataclass(frozen=True)
+class ParabolaFit:
     """``p(r) = a (R² − r²)`` fitted by least squares (:func:`fit_parabola`).
 
     Attributes:
