@@ -24,9 +24,10 @@ under pressure is ``colony.replace(rates=pressure_growth_rate(base, mechanics.pr
 each step, not from the rates the hook set the step before, or the slowing compounds.
 
 A hook that depends only on what it is given (the colony, its ids and time, the step, the
-mechanics, which the snapshots keep) continues exactly when a run is resumed from a snapshot. A hook that needs random numbers can draw them
-from a generator seeded by the cell id (``np.random.default_rng([seed, id])``) so that they do
-not depend on the order of the calls; state a hook keeps for itself is not saved.
+mechanics, which the snapshots keep) continues exactly when a run is resumed from a snapshot. A
+hook that needs random numbers can draw them from a generator seeded by the cell id
+(``np.random.default_rng([seed, id])``) so that they do not depend on the order of the calls;
+state a hook keeps for itself is not saved.
 """
 
 from __future__ import annotations

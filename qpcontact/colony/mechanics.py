@@ -22,9 +22,10 @@ Units: force/length² in 3D.
 monolayer (all cells and forces in the xy-plane) the pressure is the 2D one: the stress is taken
 over the cell's *footprint* ``A_i = 2ρ l + π ρ²`` instead of its volume, and
 ``p_i = −(σ_xx + σ_yy)/2`` [force/length], the in-plane mean normal stress.
-A cell with no loaded contact has zero stress; a contact whose point lies farther from the
-cell's centre along the force than across it (a rod end pressed at a slant) can make a cell's
-pressure slightly negative (tension).
+A cell with no loaded contact has zero stress. A contact force that points away from the
+cell's centre at its contact point (``r·f > 0``: possible at the end of a rod lying across
+another at a slant) counts as tension and can make a cell's pressure negative (none of the 5,001
+cells of the grown colony of docs/mechanics.md).
 
 **Growth under pressure** (:func:`pressure_growth_rate`): ``r = r₀·max(0, 1 − p/p_s)``
 (``"linear"``: growth stops at the stall pressure ``p_s``) or ``r = r₀·exp(−p/p_s)``
@@ -41,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import instance, number, real_array
+from ..checks import flag, instance, number, real_array
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Contacts, capsule_footprint, capsule_volume
 from ..geometry.cells import PLANAR_TOLERANCE
@@ -85,9 +86,11 @@ def cell_forces(cells: Cells, contacts: Contacts, forces: Any) -> tuple[np.ndarr
 
     Returns:
         ``(force, torque)``: (N, 3) the sum of the contact forces on each cell [force], and (N, 3)
-        their torque about the cell's centre [force·length]. Over a step of the position-level
-        step these are the linear and angular parts of its ``impulses`` (module docstring of
-        :mod:`qpcontact.colony.position`).
+        their torque about the cell's centre [force·length]. For a position step whose cells
+        do not move (a resting load) these are the linear and angular parts of its
+        ``impulses``, to the solver's tolerance; where cells move, the contacts (reported at the
+        end of the step) have turned since the forces were solved for, and the small net
+        forces do not reproduce the impulses (docs/mechanics.md).
 
     Raises:
         InvalidArgumentError: contacts not of these cells, or forces of the wrong shape or not
@@ -136,7 +139,8 @@ def cell_stress(cells: Cells, contacts: Contacts, forces: Any, *, planar: bool |
 def _stress(cells: Cells, contacts: Contacts, forces: Any, planar: bool | None) -> tuple[np.ndarray, bool]:
     """:func:`cell_stress`, and whether it is the 2D one (``planar``, detected if None)."""
     cell, offset, force = _loads(cells, contacts, forces)  # checks the arguments first
-    planar = is_planar(cells, contacts) if planar is None else bool(planar)
+    planar = flag("planar", planar, allow_none=True)
+    planar = is_planar(cells, contacts) if planar is None else planar
     virial = _per_cell(cells.n, cell, offset[:, :, None] * force[:, None, :])
     return virial / cell_sizes(cells, planar)[:, None, None], planar
 

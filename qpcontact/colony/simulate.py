@@ -417,9 +417,10 @@ def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float,
     (before division), from ``mechanics`` (:func:`step_mechanics`; NaN without)."""
     out = outcome.result
     pressure = np.array([np.nan]) if mechanics is None else mechanics.pressure
+    if pressure.size == 0:  # no cells
+        pressure = np.zeros(1)
     common = dict(step=step, time=colony.time, dt=outcome.dt, cells=colony.cells.n, step_seconds=seconds,
-                  rejected=outcome.rejected, mean_pressure=float(np.mean(pressure)) if pressure.size else 0.0,
-                  max_pressure=float(np.max(pressure, initial=0.0)) if pressure.size else 0.0)
+                  rejected=outcome.rejected, mean_pressure=float(pressure.mean()), max_pressure=float(pressure.max()))
     if isinstance(out, PositionStepResult):
         overlapping = -out.contacts.separation[out.contacts.separation < 0]
         diameter = 2.0 * float(np.median(colony.cells.radii))

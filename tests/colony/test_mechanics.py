@@ -225,6 +225,8 @@ def test_bad_forces_and_contacts_are_named_errors():
             qc.cell_stress(cells, contacts, forces)
     with pytest.raises(InvalidArgumentError, match="contacts"):
         qc.cell_pressure(cells, "contacts", [1.0])
+    with pytest.raises(InvalidArgumentError, match="planar: expected True, False or None"):
+        qc.cell_pressure(cells, contacts, [1.0, 1.0], planar="yes")
     with pytest.raises(InvalidArgumentError, match="contacts.cell_a"):  # contacts of another scene
         qc.cell_forces(cells, dataclasses.replace(contacts, cell_a=np.array([0, 1])), [1.0, 1.0])
 
