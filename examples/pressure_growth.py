@@ -2,7 +2,7 @@
 contacts put on it, so that a colony stalls inside and grows at its edge.
 
 ``hook(colony, step, mechanics)`` is called at the start of every step of ``qpcontact simulate``
-(with ``--model examples/pressure_growth.py``) or of ``qpcontact.colony.run_colony(..., hook=hook)``;
+(with ``--hook examples/pressure_growth.py``) or of ``qpcontact.colony.run_colony(..., hook=hook)``;
 because it takes a parameter named ``mechanics``, the run hands it each cell's pressure and
 stress over the step before (a :class:`qpcontact.colony.CellMechanics`; 2D pressure in F/µm,
 F the force that moves 1 µm³ of cell at 1 µm per doubling time). Here:
@@ -17,12 +17,15 @@ It grows a colony to ``--cells`` twice, without feedback (a stall pressure of 1e
 hook, rates exactly the cells' own) and with it, and says how much longer the second took and
 how the pressure differs.
 
-The same law without a hook, for a whole run: ``run_colony(settings,
-pressure_growth=PressureGrowth("linear", stall_pressure))``. The pressure is in the snapshots, so
-a run resumed from one (``--resume``) continues exactly.
+The same laws without a hook, for a whole run: the model settings ``pressure_growth`` and
+``stall_pressure`` (``qpcontact simulate --pressure-growth linear --stall-pressure 40``; in
+Python ``Settings().updated({"pressure_growth": "linear", "stall_pressure": 40.0})``, or
+``run_colony(settings, pressure_growth=PressureGrowth("linear", 40.0))``), which slow each cell's
+own rate without a hook. The pressure is in the snapshots, so a run resumed from one
+(``--resume``) continues exactly.
 
     python examples/pressure_growth.py [--cells 400] [--stall-pressure 40] [--out pressure-out]
-    qpcontact simulate --model examples/pressure_growth.py --cells 400
+    qpcontact simulate --hook examples/pressure_growth.py --cells 400
 """
 
 from __future__ import annotations
@@ -59,7 +62,7 @@ def make_hook(stall_pressure: float, law: str = "linear") -> Callable[[Colony, i
     return hook
 
 
-#: What ``qpcontact simulate --model examples/pressure_growth.py`` calls.
+#: What ``qpcontact simulate --hook examples/pressure_growth.py`` calls.
 hook = make_hook(STALL_PRESSURE)
 
 
@@ -74,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     folder = RunFolder.create(args.out, overwrite=args.overwrite)
-    settings = Settings(n_cells=args.cells)
+    settings = Settings().updated({"cells": args.cells})
     free = run_colony(settings, progress=False, hook=make_hook(1e300, args.law))
     slowed = run_colony(settings, progress=False, hook=make_hook(args.stall_pressure, args.law), folder=folder)
     for name, run in (("without feedback", free), (f"growth {args.law}, stalling at {args.stall_pressure:g} F/µm", slowed)):

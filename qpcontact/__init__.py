@@ -36,7 +36,7 @@ from .errors import (
     UnknownSolverError,
 )
 from .geometry import Cells, Contacts, Plane, channel, colliding, concatenate, find_contacts, plane_contacts, substrate
-from .resolve import Agreement, Result, compare_with_linear, reference_solution, resolve, solve_system
+from .resolve import Agreement, Result, SystemSolution, compare_with_linear, reference_solution, resolve, solve_system
 from .solvers import FORMS, FORMULATIONS, SolverSpec, available_solvers, get_solver
 
 __version__ = "0.1.0"
@@ -44,8 +44,8 @@ __version__ = "0.1.0"
 __all__ = [
     "FORMS", "FORMULATIONS", "Agreement", "Cells", "Colony", "ContactSystem", "Contacts", "InvalidArgumentError",
     "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
-    "SolverSpec", "StepResult", "TooManyContactsError", "UnknownSolverError", "available_solvers", "build_system",
-    "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
+    "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
+    "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
     "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
     "load_colony", "plane_contacts", "pressure_growth_rate", "reference_solution", "resolve", "save_colony", "solve_system", "step",
     "substrate",

@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -25,8 +23,8 @@ def run_example(name: str, *argv: str) -> int:
 
 
 def test_every_example_is_tested():
-    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "performance_ab",
-              "foreign_state", "pressure_growth"}
+    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "foreign_state",
+              "pressure_growth"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -75,18 +73,8 @@ def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
     assert run_example("model_hook", "--cells", "6", "--out", str(tmp_path / "script")) == 0
     from qpcontact.cli import main
 
-    assert main(["simulate", "--model", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
+    assert main(["simulate", "--hook", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
                  "--quiet"]) == 0
-
-
-def test_the_before_after_timing_runs_against_a_checkout():
-    """(It re-imports qpcontact from another folder, so it runs in its own process; here the
-    "old" checkout is this one.)"""
-    done = subprocess.run([sys.executable, str(EXAMPLES / "performance_ab.py"), str(ROOT), "--sizes", "200",
-                           "--dimensions", "2", "--repeats", "1", "--cache-dir", "none", "--solvers", "osqp/contact"],
-                          capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert "| 2D | 200 | detect |" in done.stdout and "| True |" in done.stdout
 
 
 def test_the_pressure_growth_example_stalls_the_inside_and_runs_as_a_model(tmp_path, capsys):
@@ -98,5 +86,5 @@ def test_the_pressure_growth_example_stalls_the_inside_and_runs_as_a_model(tmp_p
     assert (tmp_path / "script" / "pressure.png").stat().st_size > 1000
     from qpcontact.cli import main
 
-    assert main(["simulate", "--model", str(EXAMPLES / "pressure_growth.py"), "--cells", "6", "--out",
+    assert main(["simulate", "--hook", str(EXAMPLES / "pressure_growth.py"), "--cells", "6", "--out",
                  str(tmp_path / "cli"), "--quiet"]) == 0

@@ -14,7 +14,12 @@
 - :mod:`.snapshots`: colony snapshots as NPZ (:func:`save_colony`, :func:`load_colony`,
   :func:`load_snapshot`; format version 2 with the run's settings, step and random state), the
   one reader and writer of cells in NPZ files;
+- :mod:`.settings`: the settings of a run, one table per concern (:class:`Settings`:
+  :class:`ModelSettings`, :class:`RunSettings`, :class:`OutputSettings`, :class:`PositionSettings`,
+  :class:`VelocitySettings`), each described once; the one merge of their sources;
 - :mod:`.simulate`: ``qpcontact simulate`` (:func:`run_colony` with :class:`Settings`);
+- :mod:`.sweep`: ``qpcontact sweep``, replicates and parameter sweeps of runs on Dask (imported
+  by the command only);
 - :mod:`.runs`: what keeps a run from losing anything: the output folder
   (:class:`RunFolder`), history appends, atomic snapshots, Ctrl-C, resuming, ``config.toml``;
 - :mod:`.hooks`: model hooks, the user's per-step function (:class:`StepControl`);
@@ -49,13 +54,15 @@ from .mechanics import (
 )
 from .position import ContactImpulses, PositionSettings, PositionStepResult, move, position_step
 from .runs import RunFolder
-from .simulate import Run, Settings, StepOutcome, run_colony
+from .settings import ModelSettings, OutputSettings, RunSettings, Settings, VelocitySettings
+from .simulate import Run, StepOutcome, run_colony
 from .snapshots import Snapshot, load_colony, load_snapshot, save_colony
 from .step import StepResult, advance, largest_overlap, overlap_fractions, rotate, step
 
 __all__ = [
-    "CellMechanics", "Colony", "ContactImpulses", "PressureGrowth", "cell_forces", "cell_pressure", "cell_stress",
-    "fit_parabola", "pressure_growth_rate", "radial_profile", "PositionSettings", "PositionStepResult", "Run", "RunFolder", "Settings", "Snapshot",
+    "CellMechanics", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
+    "PositionStepResult", "PressureGrowth", "Run", "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
+    "cell_forces", "cell_pressure", "cell_stress", "fit_parabola", "pressure_growth_rate", "radial_profile",
     "StepControl", "StepOutcome", "StepResult", "advance", "divide", "expansion_time_step", "grow", "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",
     "overlap_fractions", "position_step", "push", "rotate", "run_colony", "save_colony", "step", "volumes",

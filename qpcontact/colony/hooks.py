@@ -11,7 +11,7 @@ and the step index. It returns
 - a :class:`StepControl`, which may also give extra momenta per cell (forces) and the division
   rule of this step.
 
-On the command line: ``qpcontact simulate --model my_model.py``, where ``my_model.py`` defines
+On the command line: ``qpcontact simulate --hook my_model.py``, where ``my_model.py`` defines
 ``hook`` (:func:`load_hook`); ``examples/model_hook.py`` is a complete example.
 
 A hook with a parameter named ``mechanics``, ``hook(colony, step, mechanics)``, is also given
@@ -21,7 +21,9 @@ of ``colony``, a newborn with its mother's; zero before the first step): growth 
 under pressure is ``colony.replace(rates=pressure_growth_rate(base, mechanics.pressure, ...))``
 (:func:`qpcontact.colony.pressure_growth_rate`; ``examples/pressure_growth.py``). The colony's
 ``rates`` are what the next step grows with and what it keeps: compute them from a base rate
-each step, not from the rates the hook set the step before, or the slowing compounds.
+each step, not from the rates the hook set the step before, or the slowing compounds. (The same
+laws without a hook: the model settings ``pressure_growth`` and ``stall_pressure``,
+``qpcontact simulate --pressure-growth linear``.)
 
 A hook that depends only on what it is given (the colony, its ids and time, the step, the
 mechanics, which the snapshots keep) continues exactly when a run is resumed from a snapshot. A

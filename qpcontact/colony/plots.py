@@ -11,8 +11,10 @@ without pyplot, so importing this module leaves the process's matplotlib backend
 - :func:`plot_pressure_profile`: the pressure of each cell of a 2D colony against its distance
   from the colony's centre, the mean in rings, and the parabola ``a (R² − r²)`` fitted to it.
 - :func:`plot_history`: cell count, largest and mean overlap (fraction of the diameter),
-  solver time per step and the solver's residuals against simulated time. Values that a log
-  axis cannot show (zero: no overlap, no contact) are left out, not drawn at a floor.
+  solver time per step, and the velocity step's solver residuals (scaled) or the position
+  step's linearizations per step, against simulated time: each panel a different quantity in
+  its own unit. Values that a log axis cannot show (zero: no overlap, no contact) are left out,
+  not drawn at a floor.
 - :func:`animate`: a GIF of saved snapshots (matplotlib's ``PillowWriter``).
 
 Lengths are labelled in µm and time in doubling times, the units of ``qpcontact simulate``
@@ -228,11 +230,19 @@ def history_figure(history: Mapping[str, Sequence[float]], title: str | None = N
     axes[0, 1].legend()
     axes[1, 0].semilogy(t, positive(history["solve_seconds"]))
     axes[1, 0].set_ylabel("contact solve per step [s]")
-    for key in ("penetration", "complementarity"):
-        if key in history and len(history[key]):
-            axes[1, 1].semilogy(t, positive(history[key]), label=key, lw=0.8)
-    axes[1, 1].set_ylabel("solver residual [dimensionless, scaled]")
-    axes[1, 1].legend()
+    residuals = [key for key in ("penetration", "complementarity")
+                 if key in history and np.any(np.isfinite(np.asarray(history[key], dtype=float)))]
+    if residuals:  # the velocity step: what its contact solve left, in the solver's scaled units
+        for key in residuals:
+            axes[1, 1].semilogy(t, positive(history[key]), label=f"{key} residual", lw=0.8)
+        axes[1, 1].set_ylabel("contact solve residual [dimensionless, scaled]")
+        axes[1, 1].legend()
+    elif "linearizations" in history:  # the position step: its overlap is measured above; its work here
+        axes[1, 1].plot(t, np.asarray(history["linearizations"], dtype=float), lw=0.8, label="linearizations")
+        if "rejected" in history:
+            axes[1, 1].plot(t, np.asarray(history["rejected"], dtype=float), lw=0.8, label="halved attempts")
+        axes[1, 1].set_ylabel("per step [count]")
+        axes[1, 1].legend()
     for ax in axes[1]:
         ax.set_xlabel(f"time [{time_unit}]")
     fig.supxlabel("steps without overlap, contacts or residual have no point on the log axes", fontsize=7, color="0.4")
@@ -243,10 +253,13 @@ def history_figure(history: Mapping[str, Sequence[float]], title: str | None = N
 
 def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title: str | None = None) -> Path:
     """Four panels against simulated time: cell count; largest and mean overlap as a fraction
-    of the diameter; solver time per step [s]; the solver's penetration and complementarity
-    residuals. ``history`` holds equal-length sequences ``time``, ``cells``, ``max_overlap``,
-    ``mean_overlap``, ``solve_seconds``, ``penetration`` and (optionally) ``complementarity``.
-    Zeros (no overlap, no contact) are not drawn (:func:`positive`)."""
+    of the diameter; solver time per step [s]; the velocity step's penetration and
+    complementarity residuals (scaled), or, where the history has none (the position step, which
+    measures the true overlap instead), its linearizations and halved attempts per step.
+    ``history`` holds equal-length sequences ``time``, ``cells``, ``max_overlap``,
+    ``mean_overlap``, ``solve_seconds`` and, optionally, ``penetration``, ``complementarity``,
+    ``linearizations``, ``rejected``. Zeros (no overlap, no contact) are not drawn
+    (:func:`positive`)."""
     history_figure(history, title).savefig(path)
     return Path(path)
 

@@ -55,6 +55,7 @@ import numpy as np
 
 from ..assembly.system import build_system
 from ..checks import number
+from ..described import documented, setting
 from ..errors import InvalidArgumentError, StepFailedError
 from ..geometry.cells import Cells
 from ..geometry.contacts import (
@@ -70,45 +71,48 @@ from ..solvers import Problem, get_solver, solve
 from .step import rotate
 
 
+@documented
 @dataclass(frozen=True)
 class PositionSettings:
-    """The parameters of :func:`position_step` (dimensionless unless said).
+    """The parameters of :func:`position_step`; the ``[position]`` table of a run's settings
+    (:class:`qpcontact.colony.Settings`), flags ``--position-*``. Each field is described once,
+    with its unit, in its :func:`~qpcontact.described.setting` (listed below)."""
 
-    Attributes:
-        overlap_tolerance: largest overlap a step may leave beyond its target, as a fraction of
-            the pair's diameter ``ρ_a + ρ_b``.
-        margin: reach of the contact search around the moved cells [diameters]; pairs farther
-            apart are not constraints in that iteration.
-        max_iterations: cap on linearizations per step.
-        turn_limit: largest displacement of a cell's tips by turning in one step [diameters of
-            that cell]; None: no bound (then any complementarity solver can be used).
-        trust: fraction of ``turn_limit`` the tips may move per iteration.
-        relaxation: overlap present at the start of the step is removed by at most this much per
-            step [fraction of the pair's diameter].
-        aim: the linearizations aim at this gap beyond each target [fraction of the pair's
-            diameter], so that the error of one linearization (turning is not linear) falls
-            within the tolerance: on a grown colony of 10⁴ cells, one linearization per step
-            instead of six (docs/performance.md). Contacts then rest at up to this gap, as if the
-            cells were this much thicker (0.5 % of a diameter by default).
-        allow_shrinking: False: contacts can stop a cell's growth but not shorten it.
-        solver: the QP solver of each linearization (it must take bounds unless ``turn_limit`` is
-            None and ``allow_shrinking`` is True).
-        tolerance: its tolerance (scaled units of :mod:`qpcontact.assembly.system`: impulses
-            relative to the largest, velocities relative to the fastest approach). 10⁻³ moves a
-            contact by at most 10⁻³ of the step's largest approach, far below the overlap
-            tolerance, in 14 interior-point iterations instead of 22 at 10⁻⁵ (docs/performance.md).
-    """
-
-    overlap_tolerance: float = 0.01
-    margin: float = 0.5
-    max_iterations: int = 30
-    turn_limit: float | None = 0.2
-    trust: float = 0.3
-    relaxation: float = 0.05
-    aim: float = 0.01
-    allow_shrinking: bool = False
-    solver: str = "ipm"
-    tolerance: float = 1e-3
+    overlap_tolerance: float = setting(
+        0.01, unit="fraction of the pair's diameter ρ_a + ρ_b", above=0,
+        help="largest overlap a step may leave beyond its target")
+    margin: float = setting(
+        0.5, unit="diameters", above=0,
+        help="reach of the contact search around the moved cells; pairs farther apart are not constraints in that "
+             "iteration")
+    max_iterations: int = setting(30, unit="linearizations", at_least=1, help="cap on linearizations per step")
+    turn_limit: float | None = setting(
+        0.2, unit="diameters of that cell", above=0,
+        help="largest displacement of a cell's tips by turning in one step; none: no bound (then any complementarity "
+             "solver can be used)")
+    trust: float = setting(0.3, unit="dimensionless", above=0, at_most=1,
+                           help="fraction of turn_limit the tips may move per iteration")
+    relaxation: float = setting(
+        0.05, unit="fraction of the pair's diameter", above=0,
+        help="overlap present at the start of the step is removed by at most this much per step")
+    aim: float = setting(
+        0.01, unit="fraction of the pair's diameter", at_least=0,
+        help="the linearizations aim at this gap beyond each target, so that the error of one linearization "
+             "(turning is not linear) falls within the tolerance: on a grown colony of 10⁴ cells, one linearization "
+             "per step instead of six (docs/performance.md); contacts then rest at up to this gap, as if the cells "
+             "were this much thicker")
+    allow_shrinking: bool = setting(
+        False, unit="", help="contacts may shorten a cell (off: they can stop its growth but not reverse it)")
+    solver: str = setting(
+        "ipm", unit="",
+        help="the QP solver of each linearization; it must take bounds (ipm, mprgp, or a qpsolvers backend in the "
+             "primal form) unless turn_limit is none and allow_shrinking is on")
+    tolerance: float = setting(
+        1e-3, unit="dimensionless, scaled", above=0, below=1,
+        help="its tolerance, in the scaled units of qpcontact.assembly.system (impulses relative to the largest, "
+             "velocities relative to the fastest approach): 10⁻³ moves a contact by at most 10⁻³ of the step's "
+             "largest approach, far below the overlap tolerance, in 14 interior-point iterations instead of 22 at "
+             "10⁻⁵ (docs/performance.md)")
 
     def __post_init__(self) -> None:
         for name in ("overlap_tolerance", "margin", "trust", "relaxation", "tolerance", "turn_limit", "aim"):

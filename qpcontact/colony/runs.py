@@ -13,7 +13,7 @@ snapshots, its stop on Ctrl-C, and how it continues.
   during a step abandons that step (nothing of it is applied, the random generator is put back)
   and the run ends with the state reached, which is saved; one that arrives between steps ends
   the run after the step. A second Ctrl-C while the outputs are written does not stop the saving.
-- TOML: :func:`write_toml` / :func:`read_toml`, a flat table of settings (``config.toml``).
+- TOML: :func:`write_toml` / :func:`read_toml`, the settings' tables (``config.toml``).
 
 Resuming: a run continued from a snapshot of step S (``qpcontact simulate --resume`` or
 ``--start OUT/snapshots/step_S.npz`` with ``--out OUT``) starts at step index S, with the
@@ -295,6 +295,8 @@ class Interrupt:
 
 # -- TOML ---------------------------------------------------------------------------------
 def _toml_value(value: Any) -> str:
+    if value is None:
+        return '"none"'  # TOML has no null; the settings read "none" as None
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -307,31 +309,33 @@ def _toml_value(value: Any) -> str:
         return repr(value)
     if isinstance(value, str):
         return json.dumps(value)  # a TOML basic string: JSON's escapes are TOML's
-    raise InvalidArgumentError(f"TOML: cannot write {value!r} (only flat tables of numbers, booleans and strings)")
+    raise InvalidArgumentError(f"TOML: cannot write {value!r} (only numbers, booleans and strings, in tables)")
 
 
 def write_toml(values: Mapping[str, Any], comment: str = "") -> str:
-    """A flat TOML table of numbers, booleans and strings, with a comment on top; read back
-    equal by :func:`read_toml` (floats exactly)."""
+    """TOML of numbers, booleans and strings (None as ``"none"``), at the top and in one level
+    of tables (``{"run": {"cells": 500}}`` is ``[run]`` / ``cells = 500``), with a comment on
+    top; read back equal by :func:`read_toml` (floats exactly)."""
     head = "".join(f"# {line}\n" for line in comment.splitlines())
-    return head + "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items())
+    text = head + "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items()
+                          if not isinstance(value, Mapping))
+    for name, values_of_table in values.items():
+        if isinstance(values_of_table, Mapping):
+            text += f"\n[{name}]\n" + "".join(f"{key} = {_toml_value(value)}\n" for key, value in values_of_table.items())
+    return text
 
 
-def read_toml(path: str | Path, tables: Sequence[str] = ()) -> dict[str, Any]:
-    """A flat TOML table; the tables named in ``tables`` (e.g. ``[sweep]``) are kept as they are.
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """A TOML file as a mapping (what its tables and keys mean is the reader's:
+    :func:`qpcontact.colony.settings.file_layer`).
 
     Raises:
-        InvalidArgumentError: the file is missing, not TOML, or has nested tables or arrays
-            other than ``tables``.
+        InvalidArgumentError: the file is missing or not TOML.
     """
     try:
         with open(path, "rb") as fh:
-            values = tomllib.load(fh)
+            return tomllib.load(fh)
     except FileNotFoundError:
         raise InvalidArgumentError(f"{path}: no such file") from None
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InvalidArgumentError(f"{path}: not a TOML file ({exc})") from None
-    nested = [key for key, value in values.items() if isinstance(value, (dict, list)) and key not in tables]
-    if nested:
-        raise InvalidArgumentError(f"{path}: only 'name = value' lines are read; {', '.join(nested)} is a table or array")
-    return values

@@ -179,9 +179,10 @@ def step(
 
     The defaults are those of a single contact solve: no margin and no position correction, so
     an overlap that a step leaves (or that the cells start with) is never cleared. A colony run
-    wants both: ``qpcontact simulate`` steps with ``margin=0.3`` [µm], ``position_correction=0.5``
-    and Clarabel at 1e-6; ``step(cells, dt, **Settings().step_options())`` (with
-    :class:`qpcontact.colony.Settings`) does the same in your own loop.
+    wants both: ``qpcontact simulate --step velocity`` steps with ``margin=0.3`` [µm],
+    ``position_correction=0.5`` and Clarabel at 1e-6 (its ``[velocity]`` settings);
+    ``step(cells, dt, **Settings().step_options())`` (with :class:`qpcontact.colony.Settings`)
+    does the same in your own loop.
 
     Args:
         cells: the state at time ``t``.

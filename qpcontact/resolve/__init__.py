@@ -2,7 +2,7 @@
 
 - :mod:`.resolve`: :func:`resolve` (find the colliding contacts, assemble, solve through the
   solver registry, check, return a :class:`Result`), :func:`solve_system` (solve an assembled
-  system and apply the acceptance checks);
+  system and apply the acceptance checks: a :class:`SystemSolution`);
 - :mod:`.metrics`: the dimensionless error measures of model.md;
 - :mod:`.validation`: high-accuracy references (:func:`reference_solution`) and the comparison
   with the plain solve (:func:`compare_with_linear`).
@@ -13,11 +13,20 @@ function (re-exported at the top level); import the modules with
 """
 
 from . import metrics
-from .resolve import ACCEPT_CAP, ACCEPT_FACTOR, Result, acceptance_failure, acceptance_limit, resolve, solve_system
+from .resolve import (
+    ACCEPT_CAP,
+    ACCEPT_FACTOR,
+    Result,
+    SystemSolution,
+    acceptance_failure,
+    acceptance_limit,
+    resolve,
+    solve_system,
+)
 from .validation import ACTIVE_THRESHOLD, Agreement, active_set_polish, compare_with_linear, reference_solution
 
 __all__ = [
-    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Result", "acceptance_failure", "acceptance_limit",
+    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Result", "SystemSolution", "acceptance_failure", "acceptance_limit",
     "active_set_polish",
     "compare_with_linear", "metrics", "reference_solution", "resolve", "solve_system",
 ]

@@ -47,19 +47,21 @@ from .harness import guarded
 
 OUTPUTS = ("grown.md", "grown.json", "grown.png")
 #: The velocity step of one step (table 2): (label, settings changes).
-VELOCITY_SOLVES = (("velocity, clarabel 1e-6", dict(solver="clarabel", tolerance=1e-6)),
-                   ("velocity, osqp 1e-3", dict(solver="osqp", tolerance=1e-3)))
+VELOCITY_SOLVES = (("velocity, clarabel 1e-6", dict(velocity_solver="clarabel", velocity_tolerance=1e-6)),
+                   ("velocity, osqp 1e-3", dict(velocity_solver="osqp", velocity_tolerance=1e-3)))
 
 
 def _settings(dimensions: int, step: str, n_cells: int, changes: dict[str, Any] | None = None) -> Settings:
-    return Settings(n_cells=n_cells, dimensions=dimensions, step=step, **(changes or {}))
+    """The run's settings: the defaults with these, by name (:meth:`Settings.updated`)."""
+    return Settings().updated({"cells": n_cells, "dimensions": dimensions, "step": step, **(changes or {})},
+                              "bench-grown")
 
 
 def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) -> dict[str, Any]:
-    """Grow one colony (``Settings(**settings)``) from one cell to the largest of ``sizes`` and
-    time it (run in a child process by :func:`run_growth`). The state at each size is saved in
-    ``save_dir`` (when given) as ``{dimensions}d-{size}.npz``."""
-    run_settings = Settings(**settings)
+    """Grow one colony (``settings``: :meth:`Settings.to_tables`) from one cell to the largest of
+    ``sizes`` and time it (run in a child process by :func:`run_growth`). The state at each size
+    is saved in ``save_dir`` (when given) as ``{dimensions}d-{size}.npz``."""
+    run_settings = Settings.from_stored(settings, "bench-grown")
     reached: dict[int, dict[str, float]] = {}
     start = time.perf_counter()
 
@@ -69,7 +71,7 @@ def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) 
                 reached[size] = dict(seconds=time.perf_counter() - start, step=step, time=colony.time,
                                      cells=colony.cells.n)
                 if save_dir is not None:
-                    save_colony(Path(save_dir) / f"{run_settings.dimensions}d-{size}.npz", colony, step)
+                    save_colony(Path(save_dir) / f"{run_settings.run.dimensions}d-{size}.npz", colony, step)
 
     run = run_colony(run_settings, progress=False, hook=note)
     note(run.colony, run.steps)  # the last state, which no hook call sees
@@ -83,7 +85,7 @@ def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) 
     return dict(reached=reached, steps=run.steps, wall=run.wall_seconds, error=run.error,
                 max_overlap=float(max(history["max_overlap"], default=0.0)),
                 linearizations=int(np.sum(history["linearizations"])), cells=int(run.colony.cells.n),
-                own_doubling=float(np.log(2.0) / settings.get("rate", np.log(2.0))), doubling=doubling,
+                own_doubling=float(np.log(2.0) / run_settings.model.rate), doubling=doubling,
                 peak_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
 
 
@@ -99,9 +101,9 @@ def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[
         take_step = step_function(settings, extra)
         dt = settings.time_step_of(colony)
         drive = None
-        if dimensions == 3 and settings.sink_speed:
+        if dimensions == 3 and settings.model.sink_speed:
             drive = np.zeros((colony.cells.n, 7))
-            drive[:, 2] = -settings.sink_speed * colony.cells.masses
+            drive[:, 2] = -settings.model.sink_speed * colony.cells.masses
         t0 = time.perf_counter()
         outcome = take_step(colony, dt, drive=drive)
         seconds.append(time.perf_counter() - t0)
@@ -117,7 +119,7 @@ def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[
 def run_growth(dimensions: int, step: str, sizes: list[int], n_cells: int, save_dir: Path | None,
                timeout: float, changes: dict[str, Any] | None = None) -> dict[str, Any]:
     """:func:`grow_once` in a child process with a time limit; the failure said, not hidden."""
-    settings = _settings(dimensions, step, n_cells, changes).to_dict()
+    settings = _settings(dimensions, step, n_cells, changes).to_tables()
     status, value = guarded(grow_once, (settings, sizes, None if save_dir is None else str(save_dir)), timeout)
     record = dict(dimensions=dimensions, step=step, target=n_cells, changes=changes or {})
     if status == "ok":

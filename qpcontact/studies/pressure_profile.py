@@ -71,9 +71,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def measure(colony: Colony, settings: Settings, bins: int = 20) -> dict[str, Any]:
     """One step of ``colony`` and what the module docstring lists, as numbers and arrays."""
-    if settings.dimensions != 2 or not np.all(colony.cells.centers[:, 2] == colony.cells.centers[0, 2]):
+    if settings.run.dimensions != 2 or not np.all(colony.cells.centers[:, 2] == colony.cells.centers[0, 2]):
         raise InvalidArgumentError("pressure_profile: the colony must be a 2D monolayer (dimensions = 2)")
-    if settings.step != "position":
+    if settings.run.step != "position":
         raise InvalidArgumentError("pressure_profile: measures the position-level step (step = position)")
     before = colony.cells
     dt = settings.time_step_of(colony)
@@ -217,7 +217,8 @@ def run_command(args: argparse.Namespace) -> int:
 
     folder = prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
     snapshot = load_snapshot(args.snapshot)
-    settings = Settings().updated(snapshot.settings or {}, f"{args.snapshot} (settings)")
+    settings = (Settings() if snapshot.settings is None
+                else Settings.from_stored(snapshot.settings, f"{args.snapshot} (settings)"))
     measured = measure(snapshot.colony, settings, bins=args.bins)
     title = (f"{measured['cells']} cells (t = {measured['time']:.2f} doubling times): one step of qpcontact simulate "
              f"from {args.snapshot.name}")

@@ -172,7 +172,7 @@ def test_a_grown_colony_step_balances_forces_and_torques_and_its_pressure_does_n
     from qpcontact.colony import Settings, grow_position, run_colony
     from qpcontact.geometry import evaluate_contacts
 
-    colony = run_colony(Settings(n_cells=60), progress=False).colony
+    colony = run_colony(Settings().updated({"cells": 60}), progress=False).colony
     _, out = grow_position(colony, 0.05, planar=True)
     contacts, forces = out.contacts, out.contact_forces
     force, torque = qc.cell_forces(out.cells, contacts, forces)

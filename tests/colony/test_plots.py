@@ -49,6 +49,24 @@ def test_history_panels_do_not_plot_clipped_floors_as_data():
     assert np.isnan(lines[1].get_ydata()[0]) and lines[1].get_ydata()[1] == 0.01
     labels = [ax.get_xlabel() for ax in figure.axes[2:]] + [figure.axes[1].get_ylabel(), figure.axes[2].get_ylabel()]
     assert labels == ["time [doubling times]"] * 2 + ["overlap [fraction of the diameter]", "contact solve per step [s]"]
+    assert figure.axes[3].get_ylabel() == "contact solve residual [dimensionless, scaled]"
+
+
+def test_each_history_panel_of_a_position_run_shows_its_own_quantity():
+    """history.png plotted the position step's overlap twice: as "largest overlap" and as a
+    solver "penetration" labelled dimensionless and scaled."""
+    from qpcontact.colony import plots
+
+    history = {"time": [0.0, 1.0, 2.0], "cells": [1, 2, 3], "max_overlap": [0.004, 0.009, 0.008],
+               "mean_overlap": [0.001, 0.002, 0.002], "solve_seconds": [0.01, 0.02, 0.03],
+               "penetration": [np.nan] * 3, "complementarity": [np.nan] * 3, "linearizations": [1, 2, 1],
+               "rejected": [0, 1, 0]}
+    figure = plots.history_figure(history)
+    panels = [[tuple(np.asarray(line.get_ydata(), dtype=float)) for line in ax.get_lines()] for ax in figure.axes]
+    series = [s for panel in panels for s in panel]
+    assert len(series) == len(set(series)) == 6  # no quantity drawn twice
+    assert figure.axes[3].get_ylabel() == "per step [count]" and panels[3][0] == (1.0, 2.0, 1.0)
+    assert len({ax.get_ylabel() for ax in figure.axes}) == 4
 
 
 def test_a_3d_colony_is_drawn_from_above_and_from_the_side_with_walls_and_units(tmp_path, monkeypatch):

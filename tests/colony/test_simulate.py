@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import qpcontact as q
+from qpcontact.colony import settings as settings_module
 from qpcontact.colony import simulate
 from qpcontact.colony.snapshots import load_colony
 from qpcontact.errors import InvalidArgumentError
@@ -29,23 +30,25 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"cfl": -1.0}, "cfl: must be finite and > 0"),
-    ({"overlap_limit": float("nan")}, "overlap_limit: must be finite and >= 0"),
-    ({"n_cells": 0}, "n_cells: must be an integer >= 1"),
-    ({"dimensions": 4}, "dimensions: must be 2 or 3"),
-    ({"position_correction": 1.5}, r"position_correction: must be in \[0, 1\]"),
+    ({"cfl": -1.0}, "cfl: expected a number > 0, got -1.0"),
+    ({"velocity_overlap_limit": float("nan")}, "velocity_overlap_limit: expected a finite number"),
+    ({"cells": 0}, "cells: expected an integer >= 1, got 0"),
+    ({"dimensions": 4}, "dimensions: expected one of 2, 3, got 4"),
+    ({"velocity_position_correction": 1.5}, r"velocity_position_correction: expected a number in \[0, 1\]"),
+    ({"position_tolerance": 2.0}, r"position_tolerance: expected a number in \(0, 1\)"),
+    ({"division_length": 0.5}, "division_length: must exceed 2 × radius = 1 µm"),
 ])
 def test_simulate_settings_are_checked(change, message):
     from qpcontact.colony.simulate import Settings
 
     with pytest.raises(InvalidArgumentError, match=message):
-        Settings(**change)
+        Settings().updated(change)
 
 
 def test_largest_overlap_stays_bounded_over_a_2d_run_with_position_correction():
     from qpcontact.colony.simulate import Settings, run_colony
 
-    run = run_colony(Settings(n_cells=150), progress=False)
+    run = run_colony(Settings().updated({"cells": 150}), progress=False)
     assert not run.error
     assert run.colony.cells.n >= 150
     assert len(run.history["max_overlap"]) > 100
@@ -69,7 +72,8 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
     plain, _, dt_plain, rejected_plain = grow_with_retries(colony, 0.1, Settings(), **options)
     assert (dt_plain, rejected_plain) == (0.1, 0)
     assert largest_overlap(plain.cells) == pytest.approx(0.5, abs=1e-9)
-    limited, _, dt_limited, rejected = grow_with_retries(colony, 0.1, Settings(overlap_limit=0.1), **options)
+    limited, _, dt_limited, rejected = grow_with_retries(colony, 0.1, Settings().updated({"velocity_overlap_limit": 0.1}),
+                                                         **options)
     assert (dt_limited, rejected) == (0.05, 1)
     assert largest_overlap(limited.cells) <= 1e-9
 
@@ -78,14 +82,14 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
 def test_the_time_step_follows_the_expansion_of_a_colony_of_the_runs_dimensions(dimensions, monkeypatch):
     """3D runs used to size their step as 2D (expansion_time_step's dimensions were never passed)."""
     passed = []
-    real = simulate.expansion_time_step
+    real = settings_module.expansion_time_step
 
     def spy(colony, **kwargs):
         passed.append(kwargs.get("dimensions"))
         return real(colony, **kwargs)
 
-    monkeypatch.setattr(simulate, "expansion_time_step", spy)
-    settings = simulate.Settings(n_cells=2, dimensions=dimensions, max_steps=3, step="velocity")
+    monkeypatch.setattr(settings_module, "expansion_time_step", spy)
+    settings = simulate.Settings().updated({"cells": 2, "dimensions": dimensions, "max_steps": 3, "step": "velocity"})
     run = simulate.run_colony(settings, progress=False)
     assert not run.error and passed == [dimensions] * run.steps
 
@@ -106,14 +110,15 @@ def bare_run(settings):
     from qpcontact.colony import divide
     from qpcontact.colony.simulate import founder, step_function
 
-    colony, rng, extra = founder(settings), np.random.default_rng(settings.seed), {}
+    model = settings.model
+    colony, rng, extra = founder(settings), np.random.default_rng(settings.run.seed), {}
     take_step = step_function(settings, extra)
-    for _ in range(settings.max_steps):
-        if colony.cells.n >= settings.n_cells:
+    for _ in range(settings.run.max_steps):
+        if colony.cells.n >= settings.run.cells:
             break
         outcome = take_step(colony, settings.time_step_of(colony), drive=None)
-        colony = divide(outcome.colony, settings.division_length, rng, axis_noise=settings.axis_noise,
-                        rate_noise=settings.rate_noise, base_rate=settings.rate, planar=True)
+        colony = divide(outcome.colony, model.division_length, rng, axis_noise=model.axis_noise,
+                        rate_noise=model.rate_noise, base_rate=model.rate, planar=True)
     return colony
 
 
@@ -124,7 +129,7 @@ def test_a_run_without_pressure_growth_is_the_bare_loop_bit_for_bit(step):
     from qpcontact.colony import PressureGrowth
     from qpcontact.colony.simulate import Settings, run_colony
 
-    settings = Settings(n_cells=40, step=step, max_steps=60)
+    settings = Settings().updated({"cells": 40, "step": step, "max_steps": 60})
     reference = bare_run(settings)
     for growth in (None, PressureGrowth("linear", 1e300)):
         run = run_colony(settings, progress=False, pressure_growth=growth)
@@ -144,7 +149,7 @@ def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rate
     from qpcontact.colony.runs import RunFolder
     from qpcontact.colony.simulate import Settings, run_colony
 
-    settings = Settings(n_cells=10**6, max_steps=120)
+    settings = Settings().updated({"cells": 10**6, "max_steps": 120})
     free = run_colony(settings, progress=False)
     stall = 0.5 * float(np.median(free.mechanics.pressure))
     seen = []
@@ -158,7 +163,7 @@ def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rate
                         folder=folder)
     assert not slowed.error and slowed.colony.time == pytest.approx(free.colony.time, rel=0.3)
     assert slowed.colony.cells.n < 0.8 * free.colony.cells.n
-    assert np.all(slowed.colony.rates > 0.5 * settings.rate)  # stored rates are the base rates
+    assert np.all(slowed.colony.rates > 0.5 * settings.model.rate)  # stored rates are the base rates
     centers, rates, pressure = seen[-1]
     effective = pressure_growth_rate(rates, pressure, stall_pressure=stall)
     r = np.linalg.norm(centers - centers.mean(axis=0), axis=1)
@@ -180,17 +185,18 @@ def test_the_history_has_the_mean_and_largest_pressure_and_pictures_colour_by_pr
     from qpcontact.colony.simulate import Settings, draw_pictures, run_colony
 
     folder = RunFolder.create(tmp_path / "run")
-    run = run_colony(Settings(n_cells=30), progress=False, folder=folder)
+    settings = Settings().updated({"cells": 30})
+    run = run_colony(settings, progress=False, folder=folder)
     history = folder.read_history()
     assert np.all(np.asarray(history["max_pressure"]) >= np.asarray(history["mean_pressure"]))
     assert history["max_pressure"][-1] > 0 and history["mean_pressure"][0] == 0.0  # one cell: nothing presses
-    draw_pictures(folder, Settings(n_cells=30), run, gif=False, color="pressure")
+    draw_pictures(folder, settings, run, gif=False, color="pressure")
     assert (tmp_path / "run" / "pressure.png").stat().st_size > 1000
     saved = []
     monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
-    draw_pictures(folder, Settings(n_cells=30), run, gif=False, color="pressure")
+    draw_pictures(folder, settings, run, gif=False, color="pressure")
     colorbar = saved[0].axes[-1]
     assert "2D pressure [F/µm]" in colorbar.get_ylabel()
     assert saved[1].axes[0].get_xlabel() == "distance from the colony's centre r [µm]"
     with pytest.raises(InvalidArgumentError, match="color: expected one of orientation, pressure"):
-        draw_pictures(folder, Settings(n_cells=30), run, gif=False, color="red")
+        draw_pictures(folder, settings, run, gif=False, color="red")

@@ -15,7 +15,7 @@ from qpcontact.studies import pressure_profile
 @pytest.fixture(scope="module")
 def snapshot(tmp_path_factory):
     folder = RunFolder.create(tmp_path_factory.mktemp("colony"))
-    run_colony(Settings(n_cells=200), progress=False, folder=folder)
+    run_colony(Settings().updated({"cells": 200}), progress=False, folder=folder)
     return sorted((folder.path / "snapshots").glob("*.npz"))[-1]
 
 
@@ -37,4 +37,4 @@ def test_a_3d_colony_is_refused(snapshot):
 
     colony, _ = load_colony(snapshot)
     with pytest.raises(InvalidArgumentError, match="2D monolayer"):
-        pressure_profile.measure(colony, Settings(dimensions=3))
+        pressure_profile.measure(colony, Settings().updated({"dimensions": 3}))
