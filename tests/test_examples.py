@@ -23,7 +23,8 @@ def run_example(name: str, *argv: str) -> int:
 
 
 def test_every_example_is_tested():
-    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "foreign_state"}
+    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "foreign_state",
+              "pressure_growth"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -74,3 +75,16 @@ def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
 
     assert main(["simulate", "--hook", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
                  "--quiet"]) == 0
+
+
+def test_the_pressure_growth_example_stalls_the_inside_and_runs_as_a_model(tmp_path, capsys):
+    assert run_example("pressure_growth", "--cells", "40", "--stall-pressure", "5", "--out", str(tmp_path / "script")) == 0
+    free, slowed = [line for line in capsys.readouterr().out.splitlines() if " cells at t = " in line]
+    time = [float(line.split("t = ")[1].split()[0]) for line in (free, slowed)]
+    largest = [float(line.split("(median) ")[1].split()[0]) for line in (free, slowed)]
+    assert time[1] > time[0] and largest[1] < largest[0]  # slower to 40 cells, and less squeezed
+    assert (tmp_path / "script" / "pressure.png").stat().st_size > 1000
+    from qpcontact.cli import main
+
+    assert main(["simulate", "--hook", str(EXAMPLES / "pressure_growth.py"), "--cells", "6", "--out",
+                 str(tmp_path / "cli"), "--quiet"]) == 0

@@ -4,6 +4,10 @@
   move) and its helpers;
 - :mod:`.position`: :func:`position_step`, the step with non-penetration at the end of the
   step (sequential linearization; the default of ``qpcontact simulate``);
+- :mod:`.mechanics`: contact forces as mechanics: :func:`cell_forces`, :func:`cell_stress`,
+  :func:`cell_pressure` (virial stress and pressure of each cell), :class:`CellMechanics`,
+  :func:`radial_profile`, :func:`fit_parabola`, growth slowed by pressure
+  (:func:`pressure_growth_rate`, :class:`PressureGrowth`);
 - :mod:`.growth`: :class:`Colony` (cells with lineage), :func:`grow` (velocity-level step) and
   :func:`grow_position` (position-level step), :func:`divide`, the time-step rules
   :func:`growth_time_step` and :func:`expansion_time_step`;
@@ -39,6 +43,16 @@ from .growth import (
     volumes,
 )
 from .hooks import StepControl, push
+from .mechanics import (
+    CellMechanics,
+    PressureGrowth,
+    cell_forces,
+    cell_pressure,
+    cell_stress,
+    fit_parabola,
+    pressure_growth_rate,
+    radial_profile,
+)
 from .position import CellMotion, ContactImpulses, PositionSettings, PositionStepResult, move, position_step
 from .runs import RunFolder
 from .settings import ModelSettings, OutputSettings, RunSettings, Settings, VelocitySettings
@@ -47,8 +61,9 @@ from .snapshots import Snapshot, load_colony, load_snapshot, save_colony
 from .step import StepResult, advance, largest_overlap, overlap_fractions, step
 
 __all__ = [
-    "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings", "PositionStepResult", "Run",
-    "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
+    "CellMechanics", "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
+    "PositionStepResult", "PressureGrowth", "Run", "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
+    "cell_forces", "cell_pressure", "cell_stress", "fit_parabola", "pressure_growth_rate", "radial_profile",
     "StepControl", "StepOutcome", "StepResult", "advance", "divide", "expansion_time_step", "grow", "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",
     "overlap_fractions", "position_step", "push", "rotate", "run_colony", "save_colony", "step", "volumes",

@@ -261,6 +261,32 @@ class PositionStepResult:
     turn_limited: int = 0
     motion: CellMotion = field(default_factory=CellMotion.empty)
 
+    @property
+    def contact_forces(self) -> np.ndarray:
+        """(K,) normal force of each contact of :attr:`contacts` over the step, ``≥ 0`` (a push),
+        in the units in which the drive is a force.
+
+        The step is overdamped: a cell moves by ``dt·W·(drive + impulses)``, so its "mass" ``m``
+        is a drag coefficient (velocity = ``p/m``) and the drive ``p`` is a force [mass·length/
+        time in the library's labels; with ``qpcontact simulate``'s masses = volumes, a free cell
+        of volume V [µm³] driven by f moves at f/V µm per doubling time]. The contact
+        "impulses" enter the motion exactly as the drive does, so they are these forces: a cell
+        held still against a wall by a drive f carries f at that contact, and the force on cell
+        a of contact k is ``contact_forces[k]·normal[k]`` at ``offset_a[k]`` (minus that on b).
+
+        They are :attr:`contact_impulses`, the last solve's multipliers: they balance
+        ``impulses`` (the momenta the cells moved with) when that solve's answer was applied in
+        full, which is every step except those whose last linearization was damped or
+        backtracked. A step that needed no solve (the free motion was within the overlap
+        tolerance, e.g. a drive too weak to move a cell by 0.02 diameters against its
+        neighbour) reports no force; contacts first found after the last solve report 0.
+        Where contacts are redundant (statically indeterminate: two rods side by side keep the
+        closest points and both ends; loops of a jammed packing) the split of a load between
+        them is the solver's pick; the net force and torque on each cell are determined (they
+        are the step's ``impulses``).
+        """
+        return self.contact_impulses
+
 
 # ---------------------------------------------------------------------------------------------
 # The contacts of a step: found at the moved positions, kept for the rest of the step

@@ -45,17 +45,21 @@ import numpy as np
 from ..errors import InvalidArgumentError, OutputFolderError
 from ..outputs import atomic_write, earlier_outputs, prepare_folder, write_text
 from .growth import Colony
+from .mechanics import CellMechanics
 from .snapshots import Snapshot, save_colony
 
 #: Columns of ``history.csv``, one row per step.
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
-                  "step_seconds", "penetration", "complementarity", "rejected", "linearizations")
+                  "step_seconds", "penetration", "complementarity", "rejected", "linearizations", "mean_pressure",
+                  "max_pressure")
+#: Columns a history written before they existed lacks: read as NaN (not measured).
+LATER_FIELDS = ("mean_pressure", "max_pressure")
 #: Columns that measure the machine, not the trajectory (they differ between two runs of the
 #: same trajectory).
 TIMING_FIELDS = ("solve_seconds", "step_seconds")
 #: Every file a run writes in its folder (glob patterns, relative to it).
 RUN_OUTPUTS = ("config.toml", "history.csv", "snapshots/step_*.npz", "colony.png", "history.png", "colony.gif",
-               "colony.pvd", "vtk/step_*.vtu")
+               "colony.pvd", "vtk/step_*.vtu", "pressure.png")
 #: Temporary files of writes that a killed process left (``qpcontact.outputs.replacing``).
 LEFTOVERS = (".*.tmp", "snapshots/.*.tmp", "vtk/.*.tmp")
 _STEP_FILE = re.compile(r"step_(\d+)\.(npz|vtu)")
@@ -137,20 +141,24 @@ class RunFolder:
     def read_history_rows(self) -> list[dict[str, str]]:
         """The rows of ``history.csv`` as text (none if it does not exist).
 
+        A history written before the columns of :data:`LATER_FIELDS` existed is read with them
+        as ``nan`` (so an earlier run can be resumed).
+
         Raises:
             OutputFolderError: it has other columns than :data:`HISTORY_FIELDS`.
         """
         if not self.history_path.exists():
             return []
+        earlier = tuple(name for name in HISTORY_FIELDS if name not in LATER_FIELDS)
         with self.history_path.open(newline="") as fh:
             reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != HISTORY_FIELDS:
+            if tuple(reader.fieldnames or ()) not in (HISTORY_FIELDS, earlier):
                 raise OutputFolderError(f"{self.history_path}: not the history of a qpcontact run (columns "
                                         f"{reader.fieldnames})")
             rows = list(reader)
         if any(None in row or None in row.values() for row in rows):
             raise OutputFolderError(f"{self.history_path}: has rows of the wrong length (a truncated file?)")
-        return rows
+        return [{**dict.fromkeys(LATER_FIELDS, "nan"), **row} for row in rows]
 
     def read_history(self) -> dict[str, list[float]]:
         """``history.csv`` by column, as numbers (the whole run, earlier attempts included)."""
@@ -175,13 +183,17 @@ class RunFolder:
         return self.path / "snapshots" / f"step_{step:06d}.npz"
 
     def save_snapshot(self, colony: Colony, step: int, *, settings: Mapping[str, Any] | None = None,
-                      rng: np.random.Generator | None = None, extra: Mapping[str, Any] | None = None) -> Path:
-        """Save the state of step ``step`` (atomically; and its ParaView file with ``vtk``)."""
-        path = self._note(save_colony(self.snapshot_path(step), colony, step, settings=settings, rng=rng, extra=extra))
+                      rng: np.random.Generator | None = None, extra: Mapping[str, Any] | None = None,
+                      mechanics: CellMechanics | None = None) -> Path:
+        """Save the state of step ``step`` (atomically; and its ParaView file with ``vtk``), with
+        the cells' pressure and stress if ``mechanics`` is given."""
+        path = self._note(save_colony(self.snapshot_path(step), colony, step, settings=settings, rng=rng, extra=extra,
+                                      mechanics=mechanics))
         if self.vtk:
             from .paraview import write_series, write_vtu  # meshio: only when asked for
 
-            vtu = self._note(write_vtu(self.path / "vtk" / f"step_{step:06d}.vtu", colony, step=step))
+            vtu = self._note(write_vtu(self.path / "vtk" / f"step_{step:06d}.vtu", colony, step=step,
+                                       mechanics=mechanics))
             self._series = [(t, p) for t, p in self._series if p != vtu] + [(colony.time, vtu)]
             self._note(write_series(self.path / "colony.pvd", self._series))
         return path

@@ -4,8 +4,8 @@ nested by concern, each described once with its unit (:func:`qpcontact.described
 - ``[model]``, :class:`ModelSettings` (flags ``--radius``, ...): the cells and how they grow;
 - ``[run]``, :class:`RunSettings` (``--cells``, ...): size, dimensions, seed, the step, the time
   step;
-- ``[output]``, :class:`OutputSettings` (``--snapshot-every``, ``--vtk``, ``--gif``): what a run
-  writes besides its history and last state;
+- ``[output]``, :class:`OutputSettings` (``--snapshot-every``, ``--vtk``, ``--gif``,
+  ``--color``): what a run writes besides its history and last state;
 - ``[position]``, :class:`~qpcontact.colony.PositionSettings` (``--position-*``): the
   position-level step;
 - ``[velocity]``, :class:`VelocitySettings` (``--velocity-*``): the velocity-level step.
@@ -55,12 +55,20 @@ from ..errors import InvalidArgumentError
 from ..geometry.surfaces import Plane, substrate
 from ..solvers import FORMS, QP_FORMULATIONS, get_solver
 from .growth import Colony, expansion_time_step, growth_time_step
+from .mechanics import GROWTH_LAWS
 from .position import PositionSettings
 from .runs import read_toml
 
-__all__ = ["FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSettings", "Settings", "VelocitySettings",
+__all__ = ["COLORS", "FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSettings", "Settings", "VelocitySettings",
            "add_setting_flags", "check_continuation", "file_layer", "flag_layer", "merge", "refuse_unused",
            "stored_values"]
+
+
+#: What ``colony.png`` can colour the cells by (``[output] color``).
+COLORS = ("orientation", "pressure")
+#: The unit of the cells' pressure of a run, and so of ``stall_pressure``: F is the force that moves
+#: 1 µm³ of free cell at 1 µm per doubling time (docs/mechanics.md).
+PRESSURE_UNITS = {2: "F/µm", 3: "F/µm²"}
 
 
 @documented
@@ -92,6 +100,16 @@ class ModelSettings:
         "", unit="", path=True,
         help="a Python file defining hook(colony, step), called at the start of every step (growth rates, division "
              "lengths, forces; examples/model_hook.py); stored as an absolute path")
+    pressure_growth: str = setting(
+        "off", unit="", choices=("off", *GROWTH_LAWS),
+        help="growth slowed by each cell's pressure of the step before (qpcontact.colony.PressureGrowth): linear, "
+             "rate × max(0, 1 − p/stall_pressure), growth stops at the stall pressure; exponential, "
+             "rate × exp(−p/stall_pressure); off: growth does not feel pressure (a run is then bit for bit what it "
+             "is without this setting)")
+    stall_pressure: float = setting(
+        100.0, unit="F/µm in 2D, F/µm² in 3D (F: docs/mechanics.md)", above=0,
+        help="pressure-dependent growth: the pressure p_s of the growth law (linear: growth stops there; "
+             "exponential: it is slowed e-fold there)")
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -165,6 +183,10 @@ class OutputSettings:
                         help="with each snapshot, a ParaView file (vtk/step_N.vtu, listed in colony.pvd with its "
                              "time); needs meshio: pip install 'qpcontact[vtk]'")
     gif: bool = setting(False, unit="", help="also write an animation colony.gif")
+    color: str = setting(
+        "orientation", unit="", choices=COLORS,
+        help="what colony.png colours the cells by: orientation (the angle of each cell's axis) or pressure (each "
+             "cell's pressure over the last step, with a colour bar in F/µm in 2D, F/µm² in 3D; docs/mechanics.md)")
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -290,6 +312,15 @@ class Settings:
         v = self.velocity
         return f"velocity step, {v.solver}/{v.formulation} at tolerance {v.tolerance:g}"
 
+    def describe_growth(self) -> str:
+        """The pressure-dependent growth, in words (pictures, summaries): ``"pressure growth
+        off"`` or ``"pressure growth linear, stall pressure 100 F/µm"``."""
+        m = self.model
+        if m.pressure_growth == "off":
+            return "pressure growth off"
+        return (f"pressure growth {m.pressure_growth}, stall pressure {m.stall_pressure:g} "
+                f"{PRESSURE_UNITS[self.run.dimensions]}")
+
     def unused(self, s: Setting) -> str:
         """Why setting ``s`` does not apply to this run ("" if it does)."""
         step = self.run.step
@@ -305,6 +336,9 @@ class Settings:
             return "3D only (cells driven towards the substrate); this run is 2D"
         if s.path == "velocity.damping" and self.velocity.dynamics != "inertial":
             return "used by inertial dynamics only (--velocity-dynamics inertial)"
+        if s.path == "model.stall_pressure" and self.model.pressure_growth == "off":
+            return ("used by pressure-dependent growth only (--pressure-growth linear or exponential); this run's "
+                    "pressure growth is off")
         return ""
 
     # -- stored and given values ------------------------------------------------------------

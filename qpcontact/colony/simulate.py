@@ -34,11 +34,21 @@ Outputs in ``--out`` (default ``./simulate-out``), checked before the run starts
   settings, enough to continue the run exactly (``--resume``);
 - ``history.csv``: one row per step, appended as the step completes (time, dt, cells, contacts,
   largest/mean overlap as a fraction of the diameter, solver seconds, step seconds, the velocity
-  step's solver residuals, linearizations);
-- ``colony.png`` (cells coloured by orientation; a side view too in 3D), ``history.png`` (cell
-  count, overlap, solver time, and the solver residuals or the linearizations per step, against
-  time), titled with the step, solver and tolerance that ran; with ``--gif`` an animation
-  ``colony.gif``, with ``--vtk`` ParaView files (``colony.pvd``, ``vtk/step_NNNNNN.vtu``).
+  step's solver residuals, linearizations, the mean and largest cell pressure);
+- ``colony.png`` (cells coloured by orientation, or by pressure with ``--color pressure``; a side
+  view too in 3D), ``history.png`` (cell count, overlap, solver time, and the solver residuals or
+  the linearizations per step, against time), titled with the step, solver and tolerance that
+  ran (and the pressure-dependent growth, if on); in 2D ``pressure.png`` (the radial pressure
+  profile); with ``--gif`` an animation ``colony.gif``, with ``--vtk`` ParaView files
+  (``colony.pvd``, ``vtk/step_NNNNNN.vtu``).
+
+Every snapshot (and ParaView file) carries each cell's pressure and stress over the step that
+led to it (:mod:`qpcontact.colony.mechanics`; :func:`step_mechanics`), from the contact forces
+of the step: in 2D per footprint area [force/µm], in 3D per volume [force/µm²], where the force
+unit is the drive's (mass·µm/doubling time, masses = volumes in µm³: a free cell of volume V
+driven by a force f moves at f/V µm per doubling time). With ``--pressure-growth linear`` or
+``exponential`` each cell's growth rate is slowed by its pressure of the step before
+(:class:`~qpcontact.colony.PressureGrowth`, ``--stall-pressure``).
 
 A step whose contact solve fails is never applied: the run stops there, says why, saves what
 it has and exits with status 1. Ctrl-C (or SIGTERM) stops the run cleanly: the state reached,
@@ -67,9 +77,11 @@ from ..errors import InvalidArgumentError, ModelHookError, SolverFailedError, St
 from ..geometry import Cells, capsule_volume
 from .growth import Colony, divide, grow, grow_position
 from .hooks import Hook, apply_hook, load_hook, push
+from .mechanics import CellMechanics, PressureGrowth
 from .position import CellMotion, ContactImpulses, PositionStepResult
 from .runs import HISTORY_FIELDS, Interrupt, RunFolder, is_inside, latest_snapshot, read_toml
 from .settings import (
+    COLORS,
     Settings,
     add_setting_flags,
     check_continuation,
@@ -83,7 +95,7 @@ from .snapshots import Snapshot, load_snapshot
 from .step import StepResult, largest_overlap
 
 __all__ = ["HISTORY_FIELDS", "Run", "Settings", "StepOutcome", "founder", "grow_with_retries", "run_colony",
-           "step_function", "turning_reach"]
+           "pressure_growth_of", "step_function", "step_mechanics", "turning_reach"]
 
 
 # (The functional form keeps the field types real types, not strings, for the API reference.)
@@ -120,6 +132,8 @@ class Run:
         first_step: the step index this call started from.
         interrupted: the signal that stopped the run (``signal.SIGINT`` for Ctrl-C), or None.
         exception: the exception behind ``error``, if any (a model hook's has its traceback).
+        mechanics: the pressure and stress of ``colony``'s cells over the last step
+            (:func:`step_mechanics`).
     """
 
     colony: Colony
@@ -131,6 +145,7 @@ class Run:
     first_step: int = 0
     interrupted: int | None = None
     exception: BaseException | None = None
+    mechanics: CellMechanics | None = None
 
 
 def founder(settings: Settings) -> Colony:
@@ -241,17 +256,22 @@ def initial_state(settings: Settings, start: Colony | Snapshot | None) -> tuple[
     return start.colony, max(start.step, 0), rng, dict(start.extra)
 
 
-def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float) -> dict[str, Any]:
+def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float,
+                mechanics: CellMechanics | None = None) -> dict[str, Any]:
     """One row of the history (:data:`HISTORY_FIELDS`): the step's index, the state after it and
     what the step did. ``max_overlap``/``mean_overlap``: the velocity-level step's are those of
     the state it starts from; the position step's those of the state it ends in.
     ``penetration``/``complementarity``: the velocity step's solver residuals (scaled,
     dimensionless); the position step checks the true distances at the end of the step instead
     (``max_overlap``), so they are not measured there (NaN), and ``linearizations`` says how many
-    solves it took."""
+    solves it took. ``mean_pressure``/``max_pressure``: over the cells of the end of the step
+    (before division), from ``mechanics`` (:func:`step_mechanics`; NaN without)."""
     out = outcome.result
+    pressure = np.array([np.nan]) if mechanics is None else mechanics.pressure
+    if pressure.size == 0:  # no cells
+        pressure = np.zeros(1)
     common = dict(step=step, time=colony.time, dt=outcome.dt, cells=colony.cells.n, step_seconds=seconds,
-                  rejected=outcome.rejected)
+                  rejected=outcome.rejected, mean_pressure=float(pressure.mean()), max_pressure=float(pressure.max()))
     if isinstance(out, PositionStepResult):
         overlapping = -out.contacts.separation[out.contacts.separation < 0]
         diameter = 2.0 * float(np.median(colony.cells.radii))
@@ -266,8 +286,34 @@ def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float)
                 complementarity=result.errors.get("complementarity", np.nan), linearizations=1)
 
 
+def step_mechanics(outcome: StepOutcome, settings: Settings) -> CellMechanics:
+    """The pressure and stress of the cells at the end of a step (``outcome.colony``, before
+    division) from the step's contact forces (:mod:`qpcontact.colony.mechanics`; 2D stress and
+    pressure for ``dimensions`` 2).
+
+    The position step's forces are its ``contact_forces``. The velocity step's contact impulses
+    are read as forces the same way (overdamped, a cell moves by ``dt·W·(drive + impulses)``;
+    inertial, the impulse over the step ``/dt``); its contacts are those of the start of the step
+    and its impulses include the push that clears overlap (position correction)."""
+    out, planar, cells = outcome.result, settings.run.dimensions == 2, outcome.colony.cells
+    if isinstance(out, PositionStepResult):
+        return CellMechanics.of(cells, out.contacts, out.contact_forces, planar=planar)
+    contacts, impulses = out.result.contacts, out.result.contact_impulses
+    inertial = settings.velocity.dynamics == "inertial"
+    forces = np.zeros(len(contacts)) if impulses is None else impulses / (outcome.dt if inertial else 1.0)
+    return CellMechanics.of(cells, contacts, forces, planar=planar)
+
+
+def pressure_growth_of(settings: Settings) -> PressureGrowth | None:
+    """The run's pressure-dependent growth from its settings (``model.pressure_growth``, the law,
+    and ``model.stall_pressure``), None when it is ``"off"``."""
+    model = settings.model
+    return None if model.pressure_growth == "off" else PressureGrowth(model.pressure_growth, model.stall_pressure)
+
+
 def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, progress: bool = True,
-               folder: RunFolder | None = None, frame_growth: float = 0.0, hook: Hook | None = None) -> Run:
+               folder: RunFolder | None = None, frame_growth: float = 0.0, hook: Hook | None = None,
+               pressure_growth: PressureGrowth | None = None) -> Run:
     """Grow a colony until it has ``settings.run.cells`` cells (or reaches step
     ``settings.run.max_steps``).
 
@@ -286,6 +332,11 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             factor since the last frame (0: no frames).
         hook: a model hook (:mod:`qpcontact.colony.hooks`); default: that of the file
             ``settings.model.hook``.
+        pressure_growth: growth slowed by each cell's pressure of the step before
+            (:class:`~qpcontact.colony.PressureGrowth`), applied after the hook; default: that of
+            ``settings.model.pressure_growth`` and ``settings.model.stall_pressure``
+            (:func:`pressure_growth_of`), None when it is ``"off"`` (the run is then what it was
+            without pressure-dependent growth, bit for bit).
 
     Returns:
         A :class:`Run`. A failed contact solve, a step that cannot be taken (a cell compressed
@@ -300,8 +351,13 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     if hook is None and settings.model.hook:
         hook = load_hook(settings.model.hook)
     take_step = step_function(settings, extra)  # the run's one step function (swap it here)
+    if pressure_growth is None:
+        pressure_growth = pressure_growth_of(settings)
     model, target, snapshot_every = settings.model, settings.run.cells, settings.output.snapshot_every
     planar = settings.run.dimensions == 2
+    stored = start.mechanics if isinstance(start, Snapshot) else None
+    # The cells' pressure and stress over the step that led to `colony` (saved with it).
+    mechanics = stored if stored is not None and stored.planar == planar else CellMechanics.zero(colony.cells.n, planar)
     history: dict[str, list[float]] = {name: [] for name in HISTORY_FIELDS}
     frames = [(colony.time, colony.cells)] if frame_growth else []
     bar = tqdm(total=target, initial=colony.cells.n, unit="cell", disable=not progress, file=sys.stderr)
@@ -311,7 +367,8 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     def save() -> None:
         nonlocal saved
         if folder is not None and saved != step:
-            folder.save_snapshot(colony, step, settings=settings.to_tables(), rng=rng, extra=extra)
+            folder.save_snapshot(colony, step, settings=settings.to_tables(), rng=rng, extra=extra,
+                                 mechanics=mechanics)
             saved = step
 
     t_start = time.perf_counter()
@@ -322,13 +379,20 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             t0 = time.perf_counter()
             try:
                 with interrupt.armed():  # a signal now abandons the step: nothing of it is applied
-                    control = apply_hook(hook, colony, step)
+                    control = apply_hook(hook, colony, step, mechanics)
                     current = colony if control.colony is None else control.colony
-                    dt = settings.time_step_of(current)
+                    stepping = current
+                    if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
+                        felt = mechanics if current is colony else mechanics.carried_over(colony, current)
+                        stepping = current.replace(rates=pressure_growth.rates(current, felt))
+                    dt = settings.time_step_of(stepping)
                     drive = push(current, [0.0, 0.0, -model.sink_speed]) if not planar and model.sink_speed else None
                     if control.drive is not None:
                         drive = control.drive if drive is None else drive + control.drive
-                    outcome = take_step(current, dt, drive=drive)
+                    outcome = take_step(stepping, dt, drive=drive)
+                    if stepping is not current:
+                        outcome = outcome._replace(colony=outcome.colony.replace(rates=current.rates))
+                    felt_now = step_mechanics(outcome, settings)
                     divided = divide(outcome.colony, model.division_length if control.division_length is None
                                      else control.division_length, rng, axis_noise=model.axis_noise,
                                      rate_noise=model.rate_noise, base_rate=model.rate, planar=planar)
@@ -347,8 +411,8 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
                 error, exception = f"{where}: step not applied: {exc}", exc
                 break
-            colony = divided
-            row = history_row(step, colony, outcome, time.perf_counter() - t0)
+            colony, mechanics = divided, felt_now.carried_over(outcome.colony, divided)
+            row = history_row(step, colony, outcome, time.perf_counter() - t0, felt_now)
             for name in HISTORY_FIELDS:
                 history[name].append(row[name])
             if folder is not None:
@@ -365,7 +429,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
         save()  # the state reached, whatever ended the run
     if frame_growth and frames[-1][1] is not colony.cells:
         frames.append((colony.time, colony.cells))
-    return Run(colony, history, wall, step, error, frames, first_step, interrupt.signal, exception)
+    return Run(colony, history, wall, step, error, frames, first_step, interrupt.signal, exception, mechanics)
 
 
 # ------------------------------------------------------------------------------------------
@@ -486,7 +550,7 @@ def run_command(args: argparse.Namespace) -> int:
     result = run_colony(settings, start=snapshot, progress=not args.quiet, folder=folder,
                         frame_growth=1.08 if settings.output.gif else 0.0)
     try:
-        draw_pictures(folder, settings, result, gif=settings.output.gif)
+        draw_pictures(folder, settings, result, gif=settings.output.gif, color=settings.output.color)
     except KeyboardInterrupt:
         print("qpcontact simulate: interrupted while drawing; the snapshot and the history are saved", file=sys.stderr)
         return 130
@@ -496,7 +560,7 @@ def run_command(args: argparse.Namespace) -> int:
           f"(= {result.colony.time / cycle:.1f} cycles of a free cell, {cycle:.2f} each); this run: "
           f"{result.steps - result.first_step} steps in {result.wall_seconds:.1f} s; largest overlap "
           f"{max(history['max_overlap'], default=0.0):.4f} of a diameter; {settings.describe_step()}: contact solve "
-          f"{np.sum(result.history['solve_seconds']):.1f} s")
+          f"{np.sum(result.history['solve_seconds']):.1f} s; {settings.describe_growth()}")
     print(describe_written(folder.written))
     if result.interrupted:
         print(f"qpcontact simulate: stopped by signal {result.interrupted} at step {result.steps}; continue with: "
@@ -510,17 +574,41 @@ def run_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bool) -> None:
-    """``colony.png`` (and a side view in 3D), ``history.png`` of the whole run (earlier
-    attempts of a resumed run included), ``colony.gif`` from this run's frames; titled with the
-    step, solver and tolerance that ran (:meth:`Settings.describe_step`)."""
-    from .plots import animate, plot_history, save_colony_picture  # matplotlib only when drawing
-
+def describe_run(settings: Settings) -> str:
+    """What ran, for the pictures' titles: ``"2D, position step, ipm at tolerance 0.001,
+    overlap ≤ 0.01"`` (:meth:`Settings.describe_step`), with the pressure-dependent growth on a
+    second line if it is on (:meth:`Settings.describe_growth`)."""
     label = f"{settings.run.dimensions}D, {settings.describe_step()}"
-    cells = result.colony.cells
-    folder.note(save_colony_picture(folder.path / "colony.png", cells,
-                                    f"{cells.n} cells at t = {result.colony.time:.2f} doubling times ({label})",
-                                    side_view=settings.run.dimensions == 3, planes=settings.planes()))
+    return label if settings.model.pressure_growth == "off" else f"{label}\n{settings.describe_growth()}"
+
+
+def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bool, color: str = "orientation") -> None:
+    """``colony.png`` (and a side view in 3D), coloured by the cells' orientation or, with
+    ``color="pressure"``, by their pressure of the last step (:attr:`Run.mechanics`, with a colour
+    bar in its units); ``history.png`` of the whole run (earlier attempts of a resumed run
+    included); in 2D ``pressure.png``, the radial pressure profile
+    (:func:`~qpcontact.colony.plots.plot_pressure_profile`); ``colony.gif`` from this run's
+    frames. Titled with what ran (:func:`describe_run`).
+
+    Raises:
+        InvalidArgumentError: ``color`` is not one of :data:`COLORS`.
+    """
+    from .plots import animate, plot_history, plot_pressure_profile, pressure_label, save_colony_picture
+
+    if color not in COLORS:
+        raise InvalidArgumentError(f"color: expected one of {', '.join(COLORS)}, got {color!r}")
+    label = describe_run(settings)
+    cells, planar = result.colony.cells, settings.run.dimensions == 2
+    mechanics = result.mechanics or CellMechanics.zero(cells.n, planar)
+    when = f"{cells.n} cells at t = {result.colony.time:.2f} doubling times"
+    by_pressure = color == "pressure"
+    folder.note(save_colony_picture(folder.path / "colony.png", cells, f"{when} ({label})",
+                                    side_view=settings.run.dimensions == 3, planes=settings.planes(),
+                                    values=mechanics.pressure if by_pressure else None,
+                                    value_label=pressure_label(planar) if by_pressure else ""))
+    if planar and cells.n:
+        folder.note(plot_pressure_profile(folder.path / "pressure.png", cells, mechanics.pressure,
+                                          f"{when}: pressure over the last step\n{label}"))
     history = folder.read_history()
     if history["step"]:
         folder.note(plot_history(folder.path / "history.png", history, label))

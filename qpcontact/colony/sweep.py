@@ -27,7 +27,7 @@ then be on a file system the workers share). Outputs in ``--out`` (default ``./s
 - ``sweep.json``: the sweep (every run's full settings) and each run's status (``pending``,
   ``done``, ``failed`` with its error), written atomically whenever a run finishes;
 - ``summary.csv``: one row per run (its varied settings, the step, solver and tolerance that
-  ran, :data:`MEASURES`: cells, steps, time, largest overlap, orientational order, times,
+  ran, its pressure-dependent growth, :data:`MEASURES`: cells, steps, time, largest overlap, orientational order, times,
   attempts, error), and ``ensemble.png``: cell count and largest
   overlap against time, mean and range across seeds for each combination of settings.
 
@@ -397,7 +397,7 @@ def _run(name: str, values: Mapping[str, Any], path: Path) -> dict[str, Any]:
         if run.interrupted:
             _event(name, "finished")
             return {**outcome, "status": "stopped", "error": f"stopped at step {run.steps}"}
-        draw_pictures(run_folder, settings, run, gif=False)
+        draw_pictures(run_folder, settings, run, gif=False, color=settings.output.color)
         measures = run_measures(run_folder.read_history(), run.colony.cells.axes, run.colony.cells.n, run.colony.time,
                                 settings.run.dimensions)
         error = run.error
@@ -488,7 +488,7 @@ class Sweep:
 
     # -- summary and picture ------------------------------------------------------------------
     def summary_columns(self) -> tuple[str, ...]:
-        return ("name", "status", *self.varied, "step", *MEASURES, "error")
+        return ("name", "status", *self.varied, "step", "growth", *MEASURES, "error")
 
     def write_summary(self) -> Path:
         rows = []
@@ -496,9 +496,9 @@ class Sweep:
             measures = dict(run.get("measures", {}))
             measures["attempts"] = len(attempts_of(self.folder(run)))
             error = " ".join(str(run.get("error", "")).split())  # one line per run
-            step = Settings.from_stored(run["settings"], run["name"]).describe_step()
-            rows.append({"name": run["name"], "status": run["status"], **run["varied"], "step": step, **measures,
-                         "error": error})
+            ran = Settings.from_stored(run["settings"], run["name"])
+            rows.append({"name": run["name"], "status": run["status"], **run["varied"], "step": ran.describe_step(),
+                         "growth": ran.describe_growth(), **measures, "error": error})
         path = self.out / SUMMARY_FILE
         write_csv(rows, path, self.summary_columns(), digits=6)
         return path

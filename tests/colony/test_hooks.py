@@ -48,6 +48,25 @@ def test_a_hook_pushes_cells_with_extra_momenta():
     assert run.colony.cells.centers[0] == pytest.approx([run.colony.time, 0.0, 0.0], abs=1e-9)
 
 
+def test_a_hook_that_takes_mechanics_gets_each_cells_pressure_of_the_step_before():
+    """One entry per cell of the colony it is given (after division: a newborn has its mother's),
+    zero before the first step, 2D pressure in a 2D run; the pressure the run's history records
+    for the step before (over the cells before division) has the same largest value."""
+    from qpcontact.colony import CellMechanics
+
+    seen = []
+
+    def hook(colony, step, mechanics):
+        assert isinstance(mechanics, CellMechanics) and mechanics.planar
+        assert mechanics.pressure.shape == (colony.cells.n,) and mechanics.stress.shape == (colony.cells.n, 3, 3)
+        seen.append(mechanics.pressure.max())
+
+    run = run_colony(SETTINGS, progress=False, hook=hook)
+    assert not run.error and len(seen) == SETTINGS.run.max_steps
+    assert seen[0] == 0.0 and max(seen) > 0
+    assert seen[1:] == pytest.approx(run.history["max_pressure"][:-1], rel=0, abs=0)
+
+
 def test_a_hook_may_return_a_colony_or_none():
     seen = []
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from qpcontact.cli import main
-from qpcontact.colony.paraview import ARRAYS, read_series
+from qpcontact.colony.paraview import ARRAYS, MECHANICS_ARRAYS, read_series
 from qpcontact.colony.snapshots import load_snapshot
 
 meshio = pytest.importorskip("meshio", reason="ParaView files need the extra qpcontact[vtk]")
@@ -21,10 +21,12 @@ def run_3d(tmp_path_factory):
     return out
 
 
-def expected(colony):
+def expected(snapshot):
+    colony, mechanics = snapshot.colony, snapshot.mechanics
     cells = colony.cells
     return {"axis": cells.axes, "length": cells.lengths, "radius": cells.radii, "id": colony.ids,
-            "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities}
+            "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities,
+            "pressure": mechanics.pressure, "stress": mechanics.stress.reshape(cells.n, 9)}
 
 
 def test_a_3d_run_writes_a_vtu_per_snapshot_and_a_time_series(run_3d):
@@ -33,7 +35,8 @@ def test_a_3d_run_writes_a_vtu_per_snapshot_and_a_time_series(run_3d):
     assert [f.name for _, f in series] == [s.name.replace(".npz", ".vtu") for s in snapshots]
     assert len(series) >= 2
     for (time, vtu), npz in zip(series, snapshots, strict=True):
-        colony = load_snapshot(npz).colony
+        snapshot = load_snapshot(npz)
+        colony = snapshot.colony
         assert time == colony.time
         mesh = meshio.read(vtu)
         n = colony.cells.n
@@ -42,8 +45,9 @@ def test_a_3d_run_writes_a_vtu_per_snapshot_and_a_time_series(run_3d):
         np.testing.assert_allclose(mesh.points[n:].reshape(n, 2, 3), np.stack([colony.cells.centers - half,
                                                                                 colony.cells.centers + half], axis=1))
         assert [(block.type, len(block.data)) for block in mesh.cells] == [("vertex", n), ("line", n)]
-        assert sorted(mesh.point_data) == sorted(ARRAYS)
-        for name, values in expected(colony).items():
+        assert sorted(mesh.point_data) == sorted(ARRAYS + MECHANICS_ARRAYS)
+        assert not snapshot.mechanics.planar and snapshot.mechanics.pressure.max() > 0  # 3D: per volume
+        for name, values in expected(snapshot).items():
             np.testing.assert_allclose(mesh.point_data[name][:n], values, err_msg=name)
             np.testing.assert_allclose(mesh.point_data[name][n:], np.repeat(values, 2, axis=0), err_msg=name)
             np.testing.assert_allclose(mesh.cell_data[name][1], values, err_msg=name)
@@ -104,12 +108,18 @@ def test_the_files_follow_the_vtk_xml_format_paraview_reads(run_3d):
                                       np.concatenate([np.arange(n), np.arange(n, 3 * n)]))
         np.testing.assert_array_equal(grid["Cells/offsets"], np.concatenate([np.arange(1, n + 1),
                                                                              n + 2 * np.arange(1, n + 1)]))
-        colony = load_snapshot(run_3d / "snapshots" / vtu.with_suffix(".npz").name).colony
-        np.testing.assert_allclose(grid["Points/Points"][:n], colony.cells.centers)
-        assert sorted(k.split("/")[1] for k in grid if k.startswith("PointData/")) == sorted(ARRAYS)
-        for name, expected_values in expected(colony).items():
+        snapshot = load_snapshot(run_3d / "snapshots" / vtu.with_suffix(".npz").name)
+        np.testing.assert_allclose(grid["Points/Points"][:n], snapshot.colony.cells.centers)
+        for section in ("PointData", "CellData"):
+            names = sorted(k.split("/")[1] for k in grid if k.startswith(f"{section}/"))
+            assert names == sorted(ARRAYS + MECHANICS_ARRAYS), section
+        for name, expected_values in expected(snapshot).items():
             np.testing.assert_allclose(grid[f"PointData/{name}"][:n], expected_values, err_msg=name)
+            # cell data: the vertices, then the lines, each cell's value once per block
+            np.testing.assert_allclose(grid[f"CellData/{name}"][n:], expected_values, err_msg=name)
         assert grid["PointData/axis"].shape == (3 * n, 3)
+        assert grid["CellData/stress"].shape == (2 * n, 9)  # a tensor, to ParaView
+        assert grid["CellData/pressure"].shape == (2 * n,) and grid["CellData/pressure"].max() > 0
 
 
 def test_a_resumed_run_keeps_the_earlier_entries_of_the_series(tmp_path):

@@ -287,3 +287,42 @@ def test_a_killed_run_leaves_whole_snapshots_and_resumes_with_a_contiguous_histo
     assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", str(last + 4)]) == 0
     assert [int(row["step"]) for row in history(out)] == list(range(last + 4))
     assert not [p for p in out.rglob(".*.tmp")]
+
+
+def test_a_run_with_pressure_growth_resumed_from_a_snapshot_equals_the_uninterrupted_one(tmp_path):
+    """The growth of each step depends on the pressure of the step before: the snapshots keep it,
+    so a run resumed from one continues exactly (a run that forgot it would grow the first step
+    after the resume unslowed)."""
+    from qpcontact.colony import PressureGrowth
+
+    settings = Settings().updated({"cells": 10**6, "max_steps": 40})
+    growth = PressureGrowth("exponential", 5.0)
+    full = run_colony(settings, progress=False, pressure_growth=growth)
+    part = run_colony(settings.updated({"max_steps": 25}), progress=False, pressure_growth=growth,
+                      folder=RunFolder.create(tmp_path / "part"))
+    snapshot = load_snapshot(tmp_path / "part" / "snapshots" / "step_000025.npz")
+    np.testing.assert_array_equal(snapshot.mechanics.pressure, part.mechanics.pressure)
+    resumed = run_colony(settings, start=snapshot, progress=False, pressure_growth=growth)
+    assert_identical(resumed.colony, full.colony)
+    np.testing.assert_array_equal(resumed.mechanics.stress, full.mechanics.stress)
+    # The law did act: slower growth, so longer steps (the fastest cell grows 5 % per step).
+    assert full.colony.time > run_colony(settings, progress=False).colony.time
+
+
+def test_a_run_folder_written_before_the_pressure_columns_is_resumed(tmp_path):
+    """history.csv without mean_pressure and max_pressure (an earlier qpcontact): its rows are
+    kept, with those columns NaN, and the resumed steps have them."""
+    out = tmp_path / "run"
+    assert main(["simulate", "--cells", "3", "--out", str(out), "--quiet", "--snapshot-every", "5", "--max-dt", "0.1",
+                 "--max-steps", "10"]) == 0
+    legacy = [name for name in HISTORY_FIELDS if name not in ("mean_pressure", "max_pressure")]
+    with (out / "history.csv").open(newline="") as fh:
+        rows = [{k: row[k] for k in legacy} for row in csv.DictReader(fh)]
+    with (out / "history.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=legacy)
+        writer.writeheader()
+        writer.writerows(rows)
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == 0
+    history = RunFolder(out).read_history()
+    assert len(history["step"]) == 13 and np.all(np.isnan(history["mean_pressure"][:10]))
+    assert np.all(np.isfinite(history["mean_pressure"][10:]))

@@ -109,6 +109,15 @@ def test_the_api_reference_shows_the_one_description():
     (["--position-trust", "1.5"], "argument --position-trust: expected a number in (0, 1], got 1.5"),
     (["--vtk", "maybe"], "argument --vtk: cannot read 'maybe' as on or off"),
     (["--hook", "nosuch.py"], "nosuch.py: no such file"),
+    # pressure-dependent growth and the picture's colour (issue 21)
+    (["--stall-pressure", "50"], "--stall-pressure: used by pressure-dependent growth only (--pressure-growth linear "
+                                 "or exponential); this run's pressure growth is off"),
+    (["--pressure-growth", "off", "--stall-pressure", "50"], "--stall-pressure: used by pressure-dependent growth only"),
+    (["--pressure-growth", "quadratic"], "argument --pressure-growth: expected one of off, linear, exponential, got "
+                                         "'quadratic'"),
+    (["--pressure-growth", "linear", "--stall-pressure", "0"], "argument --stall-pressure: expected a number > 0, got 0.0"),
+    (["--pressure-growth", "linear", "--stall-pressure", "inf"], "argument --stall-pressure: expected a finite number"),
+    (["--color", "red"], "argument --color: expected one of orientation, pressure, got 'red'"),
 ])
 def test_a_flag_that_does_not_apply_or_cannot_be_used_is_refused_before_the_run(argv, message, tmp_path, capsys,
                                                                                 monkeypatch):
@@ -214,3 +223,111 @@ def test_the_cycle_time_is_the_time_from_birth_to_division_of_a_free_cell():
     assert cycle == pytest.approx(1.27, abs=0.005)
     assert divided - born == pytest.approx(cycle, abs=0.02)  # two daughters touching end to end grow freely
     assert ModelSettings(rate=0.0).cycle_time() == math.inf
+
+
+# ------------------------------------------------------------------------------------------
+# Pressure-dependent growth and the picture's colour (issue 21)
+# ------------------------------------------------------------------------------------------
+def test_the_pressure_settings_are_described_once_with_their_units():
+    growth, stall, color = (find_setting(Settings, name) for name in ("pressure_growth", "stall_pressure", "color"))
+    assert (growth.path, growth.flag, growth.default, growth.description.choices) == (
+        "model.pressure_growth", "--pressure-growth", "off", ("off", "linear", "exponential"))
+    assert (stall.path, stall.flag, stall.default, stall.description.bounds()) == (
+        "model.stall_pressure", "--stall-pressure", 100.0, "> 0")
+    assert "F/µm in 2D, F/µm² in 3D" in stall.description.unit
+    assert (color.path, color.flag, color.default, color.description.choices) == (
+        "output.color", "--color", "orientation", ("orientation", "pressure"))
+    help_text = simulate_parser().format_help()
+    assert "--pressure-growth {off,linear,exponential}" in help_text and "--color {orientation,pressure}" in help_text
+    settings = Settings().updated({"pressure_growth": "exponential", "stall_pressure": 20})
+    assert settings.describe_growth() == "pressure growth exponential, stall pressure 20 F/µm"
+    assert settings.updated({"dimensions": 3}).describe_growth().endswith("F/µm²")
+    assert Settings().describe_growth() == "pressure growth off"
+
+
+def test_pressure_growth_flags_slow_the_run_as_the_law_does_and_are_named_where_the_run_is_told(tmp_path, capsys):
+    """--pressure-growth linear --stall-pressure 0.5 runs what run_colony(pressure_growth=
+    PressureGrowth("linear", 0.5)) runs, bit for bit; config.toml, the snapshots and the last
+    line say so; the same steps without it reach an earlier time (growth is not slowed)."""
+    from qpcontact.colony import PressureGrowth
+
+    common = ["--cells", "1000000", "--max-steps", "40", "--quiet"]
+    slowed_out, free_out = tmp_path / "slowed", tmp_path / "free"
+    assert cli.main(["simulate", "--pressure-growth", "linear", "--stall-pressure", "0.5", *common,
+                     "--out", str(slowed_out)]) == 0
+    printed = capsys.readouterr().out
+    assert "pressure growth linear, stall pressure 0.5 F/µm" in printed
+    saved = read_toml(slowed_out / "config.toml")["model"]
+    assert (saved["pressure_growth"], saved["stall_pressure"]) == ("linear", 0.5)
+    slowed = load_snapshot(max((slowed_out / "snapshots").iterdir()))
+    settings = Settings.from_stored(slowed.settings, "s")
+    assert (settings.model.pressure_growth, settings.model.stall_pressure) == ("linear", 0.5)
+    explicit = run_colony(settings.updated({"pressure_growth": "off"}), progress=False,
+                          pressure_growth=PressureGrowth("linear", 0.5))
+    np.testing.assert_array_equal(explicit.colony.cells.centers, slowed.colony.cells.centers)
+    np.testing.assert_array_equal(explicit.colony.cells.lengths, slowed.colony.cells.lengths)
+    assert explicit.colony.time == slowed.colony.time
+    assert cli.main(["simulate", *common, "--out", str(free_out)]) == 0
+    printed = capsys.readouterr().out
+    assert "pressure growth off" in printed
+    saved = read_toml(free_out / "config.toml")["model"]
+    assert saved["pressure_growth"] == "off" and "stall_pressure" not in saved  # only what applies
+    free = load_snapshot(max((free_out / "snapshots").iterdir()))
+    assert free.step == slowed.step and free.colony.time < slowed.colony.time  # slowed: longer steps
+
+
+def test_the_color_flag_colours_colony_png_by_pressure_and_the_default_by_orientation(tmp_path, monkeypatch):
+    from qpcontact.colony import plots
+
+    drawn = {}
+    original = plots.save_colony_picture
+
+    def spy(path, cells, title=None, **kwargs):
+        drawn[path.parent.name] = (title, kwargs.get("values"), kwargs.get("value_label", ""))
+        return original(path, cells, title, **kwargs)
+
+    monkeypatch.setattr(plots, "save_colony_picture", spy)
+    for name, flags in (("orientation", []), ("pressure", ["--color", "pressure"]),
+                        ("slowed", ["--color", "pressure", "--pressure-growth", "exponential", "--stall-pressure", "3"])):
+        assert cli.main(["simulate", "--cells", "6", *flags, "--out", str(tmp_path / name), "--quiet"]) == 0
+    title, values, label = drawn["orientation"]
+    assert values is None and label == "" and "pressure growth" not in title
+    assert read_toml(tmp_path / "orientation" / "config.toml")["output"]["color"] == "orientation"
+    title, values, label = drawn["pressure"]
+    last = load_snapshot(max((tmp_path / "pressure" / "snapshots").iterdir()))
+    np.testing.assert_array_equal(values, last.mechanics.pressure)  # the pressure of the last state
+    assert "2D pressure [F/µm]" in label and "position step, ipm" in title
+    assert read_toml(tmp_path / "pressure" / "config.toml")["output"]["color"] == "pressure"
+    title, _, _ = drawn["slowed"]
+    assert title.endswith("overlap ≤ 0.01\npressure growth exponential, stall pressure 3 F/µm)")  # names what ran
+    for name in drawn:
+        assert (tmp_path / name / "colony.png").stat().st_size > 1000
+
+
+def test_a_config_file_with_the_pressure_settings(tmp_path, capsys):
+    config = tmp_path / "run.toml"
+    config.write_text('[model]\npressure_growth = "exponential"\nstall_pressure = 2.5\n'
+                      '[run]\ncells = 5\n[output]\ncolor = "pressure"\n')
+    out = tmp_path / "run"
+    assert cli.main(["simulate", "--config", str(config), "--out", str(out), "--quiet"]) == 0
+    saved = read_toml(out / "config.toml")
+    assert (saved["model"]["pressure_growth"], saved["model"]["stall_pressure"], saved["output"]["color"]) == (
+        "exponential", 2.5, "pressure")
+    assert "pressure growth exponential, stall pressure 2.5 F/µm" in capsys.readouterr().out
+    # Flags override the file; the run's own config.toml runs again.
+    assert cli.main(["simulate", "--config", str(config), "--pressure-growth", "linear", "--out", str(tmp_path / "b"),
+                     "--quiet"]) == 0
+    assert read_toml(tmp_path / "b" / "config.toml")["model"]["pressure_growth"] == "linear"
+    assert cli.main(["simulate", "--config", str(out / "config.toml"), "--out", str(tmp_path / "c"), "--quiet"]) == 0
+    # A stall pressure in a file whose pressure growth is off: refused unless it is the default.
+    capsys.readouterr()
+    config.write_text('[model]\nstall_pressure = 2.5\n[run]\ncells = 2\n')
+    assert cli.main(["simulate", "--config", str(config), "--out", str(tmp_path / "d"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "[model] stall_pressure: used by pressure-dependent growth only" in err, err
+    assert not (tmp_path / "d").exists()
+    config.write_text('[model]\npressure_growth = "off"\nstall_pressure = 100.0\n[run]\ncells = 2\n')
+    assert cli.main(["simulate", "--config", str(config), "--out", str(tmp_path / "e"), "--quiet"]) == 0
+    config.write_text('[model]\npressure_growth = "fast"\n')
+    assert cli.main(["simulate", "--config", str(config), "--out", str(tmp_path / "f"), "--quiet"]) == 2
+    assert "[model] pressure_growth: expected one of off, linear, exponential, got 'fast'" in capsys.readouterr().err

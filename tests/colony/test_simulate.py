@@ -102,3 +102,101 @@ def test_expansion_time_step_is_shorter_in_2d_than_in_3d():
     for dimensions in (2, 3):
         dt = q.expansion_time_step(colony, max_dt=10.0, cfl=0.2, dimensions=dimensions)
         assert dt == pytest.approx(0.2 * 1.0 / (1.0 * reach / dimensions))
+
+
+def bare_run(settings):
+    """What a run was before it measured pressure: the founder, then per step the run's step
+    function and division, nothing else (2D: no drive)."""
+    from qpcontact.colony import divide
+    from qpcontact.colony.simulate import founder, step_function
+
+    model = settings.model
+    colony, rng, extra = founder(settings), np.random.default_rng(settings.run.seed), {}
+    take_step = step_function(settings, extra)
+    for _ in range(settings.run.max_steps):
+        if colony.cells.n >= settings.run.cells:
+            break
+        outcome = take_step(colony, settings.time_step_of(colony), drive=None)
+        colony = divide(outcome.colony, model.division_length, rng, axis_noise=model.axis_noise,
+                        rate_noise=model.rate_noise, base_rate=model.rate, planar=True)
+    return colony
+
+
+@pytest.mark.parametrize("step", ["position", "velocity"])
+def test_a_run_without_pressure_growth_is_the_bare_loop_bit_for_bit(step):
+    """Measuring pressure changes nothing of a trajectory; pressure growth whose factor is
+    exactly 1 (a stall pressure of 1e300: 1 − p/1e300 rounds to 1) neither."""
+    from qpcontact.colony import PressureGrowth
+    from qpcontact.colony.simulate import Settings, run_colony
+
+    settings = Settings().updated({"cells": 40, "step": step, "max_steps": 60})
+    reference = bare_run(settings)
+    for growth in (None, PressureGrowth("linear", 1e300)):
+        run = run_colony(settings, progress=False, pressure_growth=growth)
+        for name in ("centers", "axes", "lengths", "masses", "growth_inertia"):
+            np.testing.assert_array_equal(getattr(run.colony.cells, name), getattr(reference.cells, name), err_msg=name)
+        for name in ("ids", "parent_ids", "rates", "owed"):
+            np.testing.assert_array_equal(getattr(run.colony, name), getattr(reference, name), err_msg=name)
+        assert run.colony.time == reference.time
+        assert run.mechanics.pressure.shape == (run.colony.cells.n,) and run.mechanics.pressure.max() > 0
+
+
+def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rates(tmp_path):
+    """Linear pressure growth with a stall pressure below the pressures a 150-cell colony
+    reaches: fewer cells after the same time, the slowest growth where the pressure is highest,
+    and the colony's rates (the base rates that daughters draw around) are not the slowed ones."""
+    from qpcontact.colony import PressureGrowth, StepControl, pressure_growth_rate
+    from qpcontact.colony.runs import RunFolder
+    from qpcontact.colony.simulate import Settings, run_colony
+
+    settings = Settings().updated({"cells": 10**6, "max_steps": 120})
+    free = run_colony(settings, progress=False)
+    stall = 0.5 * float(np.median(free.mechanics.pressure))
+    seen = []
+
+    def watch(colony, step, mechanics):  # the pressure the run's growth law sees before each step
+        seen.append((colony.cells.centers, colony.rates.copy(), mechanics.pressure.copy()))
+        return StepControl()
+
+    folder = RunFolder.create(tmp_path / "run")
+    slowed = run_colony(settings, progress=False, pressure_growth=PressureGrowth("linear", stall), hook=watch,
+                        folder=folder)
+    assert not slowed.error and slowed.colony.time == pytest.approx(free.colony.time, rel=0.3)
+    assert slowed.colony.cells.n < 0.8 * free.colony.cells.n
+    assert np.all(slowed.colony.rates > 0.5 * settings.model.rate)  # stored rates are the base rates
+    centers, rates, pressure = seen[-1]
+    effective = pressure_growth_rate(rates, pressure, stall_pressure=stall)
+    r = np.linalg.norm(centers - centers.mean(axis=0), axis=1)
+    inside, edge = r < np.quantile(r, 0.2), r > np.quantile(r, 0.8)
+    assert np.any(effective == 0) and effective[edge].mean() > 1.5 * effective[inside].mean()  # stalled inside
+    # The snapshot of the last state carries the mechanics the run ended with.
+    snapshot = sorted((tmp_path / "run" / "snapshots").glob("*.npz"))[-1]
+    from qpcontact.colony.snapshots import load_snapshot
+
+    np.testing.assert_array_equal(load_snapshot(snapshot).mechanics.pressure, slowed.mechanics.pressure)
+    history = folder.read_history()
+    assert history["max_pressure"][-1] >= history["mean_pressure"][-1] > 0
+
+
+def test_the_history_has_the_mean_and_largest_pressure_and_pictures_colour_by_pressure(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from qpcontact.colony.runs import RunFolder
+    from qpcontact.colony.simulate import Settings, draw_pictures, run_colony
+
+    folder = RunFolder.create(tmp_path / "run")
+    settings = Settings().updated({"cells": 30})
+    run = run_colony(settings, progress=False, folder=folder)
+    history = folder.read_history()
+    assert np.all(np.asarray(history["max_pressure"]) >= np.asarray(history["mean_pressure"]))
+    assert history["max_pressure"][-1] > 0 and history["mean_pressure"][0] == 0.0  # one cell: nothing presses
+    draw_pictures(folder, settings, run, gif=False, color="pressure")
+    assert (tmp_path / "run" / "pressure.png").stat().st_size > 1000
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
+    draw_pictures(folder, settings, run, gif=False, color="pressure")
+    colorbar = saved[0].axes[-1]
+    assert "2D pressure [F/µm]" in colorbar.get_ylabel()
+    assert saved[1].axes[0].get_xlabel() == "distance from the colony's centre r [µm]"
+    with pytest.raises(InvalidArgumentError, match="color: expected one of orientation, pressure"):
+        draw_pictures(folder, settings, run, gif=False, color="red")

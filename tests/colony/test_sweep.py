@@ -100,6 +100,12 @@ def test_the_grid_from_a_configuration_file_with_flags_overriding_it(tmp_path):
     (["--snapshot-every", "0"], "snapshot_every: a sweep's run continues from its latest snapshot"),
     (["--solver", "osqp"], "--solver: each step has its own: --position-solver"),
     (["--resume"], "holds no sweep to resume"),
+    (["--vary", "stall_pressure=10,50"], "--vary: stall_pressure: used by pressure-dependent growth only"),
+    (["--stall-pressure", "10"], "command line: --stall-pressure: used by pressure-dependent growth only"),
+    (["--vary", "pressure_growth=off,quadratic"],
+     "run pressure_growth-quadratic__seed-1: pressure_growth: expected one of off, linear, exponential, got "
+     "'quadratic'"),
+    (["--vary", "color=orientation,red"], "run color-red__seed-1: color: expected one of orientation, pressure, got 'red'"),
 ])
 def test_a_bad_setting_is_rejected_before_any_task_starts(argv, message, tmp_path, capsys, monkeypatch):
     def no_cluster(*args, **kwargs):
@@ -111,6 +117,32 @@ def test_a_bad_setting_is_rejected_before_any_task_starts(argv, message, tmp_pat
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("qpcontact sweep: ") and message in err, err
     assert not out.exists()
+
+
+def test_a_sweep_of_pressure_growth_off_and_on_is_planned_with_each_runs_law(tmp_path, monkeypatch):
+    """--vary pressure_growth=off,linear with --stall-pressure: the stall pressure applies to the
+    linear runs, so it is not refused; each run's settings carry its law, and summary.csv names
+    the growth that ran next to the step (checked on the planned sweep: no cluster started)."""
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(cluster, "open_client", no_cluster)
+    out = tmp_path / "out"
+    args = cli.command_parser(cli.build_parser("sweep"), "sweep").parse_args(
+        ["--cells", "5", "--seeds", "1,2", "--vary", "pressure_growth=off,linear", "--stall-pressure", "40",
+         "--color", "pressure", "--out", str(out)])
+    planned, runs = sweep.prepare(args)
+    assert [r["name"] for r in runs] == ["pressure_growth-off__seed-1", "pressure_growth-off__seed-2",
+                                         "pressure_growth-linear__seed-1", "pressure_growth-linear__seed-2"]
+    for run in runs:
+        model = run["settings"]["model"]
+        assert (model["pressure_growth"], model["stall_pressure"]) == (run["varied"]["pressure_growth"], 40.0)
+        assert run["settings"]["output"]["color"] == "pressure"
+    planned.write_summary()
+    summary = read_summary(out)
+    assert summary["pressure_growth-off__seed-1"]["growth"] == "pressure growth off"
+    assert summary["pressure_growth-linear__seed-2"]["growth"] == "pressure growth linear, stall pressure 40 F/µm"
+    assert summary["pressure_growth-linear__seed-2"]["pressure_growth"] == "linear"
 
 
 def test_sweep_without_dask_says_which_extra_to_install(tmp_path, capsys, monkeypatch):
