@@ -19,6 +19,8 @@ from qpcontact.geometry import Contacts, Plane, capsule_footprint, capsule_volum
 
 RADIUS = 0.5
 
+#: The gap at which the position step leaves touching cells (its aim, for cells of radius RADIUS).
+REST_GAP = PositionSettings().aim * 2 * RADIUS
 
 def rods(centers, axes, lengths, growth_inertia=np.inf):
     """Capsules of radius 0.5 with mass = volume (as ``qpcontact simulate``)."""
@@ -43,7 +45,7 @@ def test_a_column_resting_on_a_plane_carries_the_weight_of_the_cells_above_each_
     the contacts between layers k and k+1 carry (4 − k)·f together, the plane 5f, and nothing
     moves. (Side-by-side rods keep three contacts each, which share a load as the solver picks:
     their sum is what statics determines.)"""
-    n, f, gap = 5, 3.0, 0.01
+    n, f, gap = 5, 3.0, REST_GAP
     z = RADIUS + gap + np.arange(n) * (2 * RADIUS + gap)
     cells = rods(np.c_[np.zeros(n), np.zeros(n), z], [[1, 0, 0]] * n, 2.0)
     drive = np.zeros((n, 7))
@@ -73,7 +75,7 @@ def test_a_cell_pushed_against_a_wall_by_a_constant_drive_presses_with_that_driv
     cell 0.1 of a diameter per step, enough for the step to solve (a weaker push creeps in
     within the overlap tolerance and reports no force: PositionStepResult.contact_forces)."""
     f, length = 5.0, 2.0
-    cells = rods([[0.0, RADIUS + 0.01, 0.0]], [[1, 0, 0]], length)
+    cells = rods([[0.0, RADIUS + REST_GAP, 0.0]], [[1, 0, 0]], length)
     drive = np.zeros((1, 7))
     drive[0, 1] = -f
     out = settle(cells, drive, [Plane((0, 0, 0), (0, 1, 0))], steps=3)
@@ -98,7 +100,7 @@ def test_the_stress_of_a_rod_growing_between_two_walls_matches_the_hand_computat
     bound here: with it, the bound and the walls would share the stopped growth.)"""
     length, dt = 3.0, 0.05
     cells = rods([[0.0, 0.0, 0.0]], [[1, 0, 0]], length, growth_inertia=1000.0)
-    pole = length / 2 + RADIUS + 0.01
+    pole = length / 2 + RADIUS + REST_GAP
     walls = [Plane((-pole, 0, 0), (1, 0, 0)), Plane((pole, 0, 0), (-1, 0, 0))]
     for _ in range(4):
         drive = np.zeros((1, 7))
