@@ -308,8 +308,8 @@ class _Tracked:
         return cls(a[first], b[first], kind[first], keys)
 
     def union(self, other: _Tracked, span: int) -> _Tracked:
-        return _Tracked.of(*(np.concatenate([u, v]) for u, v in
-                             ((self.a, other.a), (self.b, other.b), (self.kind, other.kind))), span)
+        return _Tracked.of(np.concatenate([self.a, other.a]), np.concatenate([self.b, other.b]),
+                           np.concatenate([self.kind, other.kind]), span)
 
 
 def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int) -> _Tracked:
@@ -321,7 +321,8 @@ def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int) -> _
     for j, plane in enumerate(planes):
         found = plane_contacts(cells, [plane], reach)
         parts.append((found.cell_a, np.full(len(found), -1 - j), found.kind))
-    return _Tracked.of(*(np.concatenate(x) for x in zip(*parts, strict=True)), span)
+    a, b, kind = (np.concatenate(x) for x in zip(*parts, strict=True))
+    return _Tracked.of(a, b, kind, span)
 
 
 def _evaluate(cells: Cells, found: _Tracked, planes: Sequence[Plane], planar: bool) -> Contacts:

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from cvxopt import cholmod
 
+pymetis: Any
 try:  # optional: the fill-reducing ordering falls back to CHOLMOD's AMD
     import pymetis
 except ImportError:  # pragma: no cover - depends on the installation

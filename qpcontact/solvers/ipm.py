@@ -63,8 +63,14 @@ CORRECTORS = 1
 #: Iterative refinement steps of each Newton direction (one more solve each, no factorization).
 REFINEMENTS = 3
 #: The smallest contact compliance ``ρ`` of the Newton systems (``s + ρλ`` for ``s``), in the
-#: scaled units: it bounds the weights ``λ/s`` of the normal matrix by ``1/ρ``.
+#: scaled units: it bounds the weights ``λ/s`` of the normal matrix in the unknowns by ``1/ρ``.
 REGULARIZATION = 1e-10
+#: ``ρ`` of the normal equations in the contact impulses, relative to :data:`REGULARIZATION`.
+CONTACTS_REGULARIZATION = 1e-4
+#: Below this error the normal equations in the unknowns lose the dual equation to rounding
+#: (measured: stalls at 10⁻⁷–5·10⁻⁵ on grown colonies); a solve asked for more continues in
+#: the contact impulses (:class:`_InContacts`).
+UNKNOWNS_ACCURACY = 1e-4
 #: Fraction of the way to the boundary an iterate may go (keeps it interior).
 STEP_FRACTION = 0.995
 
@@ -98,40 +104,28 @@ class _Iterate:
 
 
 class _Newton:
-    """The Newton system of one iteration, factorized once, solved for several targets."""
+    """The Newton system of one iteration, factorized once, solved for several targets: the
+    residuals, the step lengths and the complementarity, whatever the space of the linear
+    system (:class:`_InUnknowns`, :class:`_InContacts`)."""
 
     def __init__(self, B: sp.csr_matrix, Bt: sp.csr_matrix, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                 has_lo: np.ndarray, has_hi: np.ndarray, x: _Iterate,
-                 solve: Callable[[np.ndarray], np.ndarray], regularization: float) -> None:
-        self.B, self.Bt, self.x, self.solve = B, Bt, x, solve
-        self.regularization = regularization
+                 has_lo: np.ndarray, has_hi: np.ndarray, x: _Iterate, regularization: float) -> None:
+        self.B, self.Bt, self.x, self.regularization = B, Bt, x, regularization
         self.has_lo, self.has_hi = has_lo, has_hi
         self.r_dual = x.y - Bt @ x.lam - x.alpha + x.beta
         self.r_primal = B @ x.y - b - x.s
         self.r_lower = np.where(has_lo, x.y - lo - x.p, 0.0)
         self.r_upper = np.where(has_hi, hi - x.y - x.q, 0.0)
+        self.solve: Callable[[np.ndarray], np.ndarray] = lambda v: v
+
+    def factor(self, matrix: GramMatrix) -> None:
+        """Factorize this iteration's system (raises ArithmeticError, CHOLMOD's)."""
+        raise NotImplementedError
 
     def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
         """Newton direction for complementarity targets ``λs → target_c``, ``αp → target_l``,
         ``βq → target_u`` (the primal, dual and bound residuals are driven to zero too)."""
-        # Eliminated: Δs = B̃Δỹ + r_p, Δλ = (target_c − λΔs)/s, Δα = (t_l − αΔỹ)/p,
-        # Δβ = (t_u + βΔỹ)/q; what is left is the dual equation, the system of the docstring.
-        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
-        t_l = target_l - x.alpha * self.r_lower
-        t_u = target_u - x.beta * self.r_upper
-        h = -self.r_dual + np.where(has_lo, t_l / x.p, 0.0) - np.where(has_hi, t_u / x.q, 0.0)
-        # Regularized (a contact compliance: s + ρλ for s) in Δλ as in the matrix, so that the
-        # dual equation holds to rounding: Δλ is recovered from Δỹ through the weight λ/(s + ρλ),
-        # which would otherwise grow without bound as the method converges and turn the rounding
-        # of Δỹ into a broken dual equation.
-        slack = x.s + self.regularization * x.lam
-        d_y = self.solve(h + self.Bt @ ((target_c - x.lam * self.r_primal) / slack))
-        d_s = self.B @ d_y + self.r_primal
-        return _Iterate(
-            y=d_y, s=d_s, lam=(target_c - x.lam * d_s) / slack,
-            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
-            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / x.p, 0.0),
-            beta=np.where(has_hi, (t_u + x.beta * d_y) / x.q, 0.0))
+        raise NotImplementedError
 
     def lengths(self, d: _Iterate) -> tuple[float, float]:
         """Largest primal and dual step lengths (≤ 1) that keep slacks and multipliers ≥ 0."""
@@ -146,6 +140,63 @@ class _Newton:
         lo, hi = self.has_lo, self.has_hi
         total = x.lam @ x.s + x.alpha[lo] @ x.p[lo] + x.beta[hi] @ x.q[hi]
         return float(total) / max(x.lam.size + int(lo.sum()) + int(hi.sum()), 1)
+
+
+class _InUnknowns(_Newton):
+    """The Newton system as normal equations in the unknowns (module docstring): eliminated
+    ``Δs = B̃Δỹ + r_p``, ``Δλ = (target_c − λΔs)/s``, ``Δα = (t_l − αΔỹ)/p``,
+    ``Δβ = (t_u + βΔỹ)/q``; what is left is the dual equation. ``s``, ``p`` and ``q`` are
+    regularized (``s + ρλ``: a tiny contact compliance) alike in the matrix and in the
+    elimination, so the dual equation holds up to the rounding of ``Δλ``, which is recovered
+    from Δỹ through the weight λ/s. That weight grows without bound as the method converges, so
+    below :data:`UNKNOWNS_ACCURACY` the method continues in :class:`_InContacts`."""
+
+    def factor(self, matrix: GramMatrix) -> None:
+        x, rho = self.x, self.regularization
+        self.slack, self.p, self.q = x.s + rho * x.lam, x.p + rho * x.alpha, x.q + rho * x.beta
+        diagonal = 1.0 + np.where(self.has_lo, x.alpha / self.p, 0.0) + np.where(self.has_hi, x.beta / self.q, 0.0)
+        self.solve = matrix.factor(x.lam / self.slack, diagonal)
+
+    def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
+        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
+        t_l = target_l - x.alpha * self.r_lower
+        t_u = target_u - x.beta * self.r_upper
+        h = -self.r_dual + np.where(has_lo, t_l / self.p, 0.0) - np.where(has_hi, t_u / self.q, 0.0)
+        d_y = self.solve(h + self.Bt @ ((target_c - x.lam * self.r_primal) / self.slack))
+        d_s = self.B @ d_y + self.r_primal
+        return _Iterate(
+            y=d_y, s=d_s, lam=(target_c - x.lam * d_s) / self.slack,
+            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
+            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / self.p, 0.0),
+            beta=np.where(has_hi, (t_u + x.beta * d_y) / self.q, 0.0))
+
+
+class _InContacts(_Newton):
+    """The Newton system as normal equations in the contact impulses,
+    ``(B̃ diag(w) B̃ᵀ + diag(s/λ + ρ)) Δλ = r`` with ``w = 1/(1 + α/p + β/q)``: Δỹ is recovered
+    from Δλ through ``w ≤ 1``, so rounding stays small however far the method converges; the
+    matrix is larger than in the unknowns (a contact for each row and column) and costlier to
+    factorize (3× on a grown 3D biofilm), so only the last iterations of a tight solve use it."""
+
+    def factor(self, matrix: GramMatrix) -> None:
+        x = self.x
+        self.w = 1.0 / (1.0 + np.where(self.has_lo, x.alpha / x.p, 0.0) + np.where(self.has_hi, x.beta / x.q, 0.0))
+        # Its own regularization is far smaller: rounding is no issue here (a pivot lost to it
+        # raises, and the loop regularizes more).
+        self.solve = matrix.factor(self.w, x.s / x.lam + self.regularization * CONTACTS_REGULARIZATION)
+
+    def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
+        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
+        t_l = target_l - x.alpha * self.r_lower
+        t_u = target_u - x.beta * self.r_upper
+        h = -self.r_dual + np.where(has_lo, t_l / x.p, 0.0) - np.where(has_hi, t_u / x.q, 0.0)
+        d_lam = self.solve(-self.r_primal + target_c / x.lam - self.B @ (self.w * h))
+        d_y = self.w * (h + self.Bt @ d_lam)
+        return _Iterate(
+            y=d_y, s=(target_c - x.s * d_lam) / x.lam, lam=d_lam,
+            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
+            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / x.p, 0.0),
+            beta=np.where(has_hi, (t_u + x.beta * d_y) / x.q, 0.0))
 
 
 def interior_point(
@@ -192,6 +243,7 @@ def interior_point(
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
     cap = max_iterations or MAX_ITERATIONS
     normal = _gram_matrix(B)
+    contact_matrix: GramMatrix | None = None
 
     # Start (Mehrotra's heuristic): the least-squares impulses of (B̃B̃ᵀ + I)λ = b̃, ỹ = B̃ᵀλ moved
     # inside the bounds (a hundredth of the interval), then impulses and slacks shifted to be
@@ -235,18 +287,22 @@ def interior_point(
         if time_limit is not None and time.perf_counter() - start > time_limit:
             status = "time_limit"
             break
-        diagonal = 1.0 + np.where(has_lo, x.alpha / x.p, 0.0) + np.where(has_hi, x.beta / x.q, 0.0)
-        solve = None
-        while solve is None:
+        # Normal equations in the unknowns (the smaller and cheaper system) until the last
+        # iterations of a tight solve, which need the stability of the contacts' (_InUnknowns).
+        in_contacts = error <= UNKNOWNS_ACCURACY and tolerance < UNKNOWNS_ACCURACY
+        newton: _Newton = (_InContacts if in_contacts else _InUnknowns)(B, Bt, b, lo, hi, has_lo, has_hi, x,
+                                                                          regularization)
+        if in_contacts and contact_matrix is None:
+            contact_matrix = GramMatrix(Bt)
+        while True:
             try:
-                # Weights λ/(s + ρλ) (see _Newton.direction); a pivot lost to rounding is
-                # regularized more.
-                solve = normal.factor(x.lam / (x.s + regularization * x.lam), diagonal)
-            except ArithmeticError:
+                newton.factor(contact_matrix if in_contacts and contact_matrix is not None else normal)
+                break
+            except ArithmeticError:  # a pivot lost to rounding: regularize more
                 regularization *= 100.0
                 if regularization > 1e-4:
                     return _result(best, best_error, iteration, "breakdown", start)
-        newton = _Newton(B, Bt, b, lo, hi, has_lo, has_hi, x, solve, regularization)
+                newton.regularization = regularization
         mu = newton.complementarity()
         affine = newton.direction(-x.lam * x.s, -x.alpha * x.p, -x.beta * x.q)
         sigma = min(1.0, (newton.complementarity(affine, *newton.lengths(affine)) / mu) ** 3) if mu > 0 else 0.0
