@@ -41,15 +41,33 @@ def ordering_name() -> str:
     return "metis" if pymetis is not None else "amd"
 
 
-def _nested_dissection(pattern: sp.csc_matrix) -> np.ndarray | None:
-    """A fill-reducing permutation of the symmetric ``pattern`` (METIS), or None (use AMD)."""
-    if pymetis is None or pattern.shape[0] < METIS_SIZE:
+def _nested_dissection(matrix: sp.csr_matrix) -> np.ndarray | None:
+    """A fill-reducing permutation of the columns of ``Aᵀ A`` for the K × n ``matrix`` ``A``
+    (METIS's nested dissection), or None (then CHOLMOD orders with AMD).
+
+    Columns that appear in exactly the same rows (the unknowns of one cell, which every contact
+    of that cell touches) are one vertex of the graph METIS orders, and stay together in the
+    permutation: a graph of the cells instead of their unknowns, 5–20× faster to order, and as
+    good a factor (on grown colonies of 10⁴ cells in 2D and 2,000 in 3D)."""
+    k, n = matrix.shape
+    if pymetis is None or n < METIS_SIZE:
         return None
-    graph = (pattern + pattern.T).tocsr()
+    # Groups of columns with the same rows, by a random signature of their rows (two columns with
+    # different rows share one with probability ~1e-16 per pair; they would only be ordered
+    # together).
+    csc = matrix.tocsc()
+    rows_of = sp.csc_matrix((np.ones(csc.nnz), csc.indices, csc.indptr), shape=(k, n))
+    _, group = np.unique(np.random.default_rng(0).random(k) @ rows_of, return_inverse=True)
+    members = sp.csr_matrix((np.ones(n), (np.arange(n), group)), shape=(n, int(group.max()) + 1))
+    touches = abs(matrix) @ members  # rows × groups
+    touches.data[:] = 1.0
+    graph = (touches.T @ touches).tocsr()
     graph.setdiag(0)
     graph.eliminate_zeros()
-    permutation, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(graph.indptr, graph.indices))
-    return np.asarray(permutation, dtype=np.int64)
+    order, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(graph.indptr, graph.indices))
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[np.asarray(order)] = np.arange(len(order))
+    return np.lexsort((np.arange(n), rank[group])).astype(np.int64)
 
 
 class GramMatrix:
@@ -93,7 +111,7 @@ class GramMatrix:
         self._indptr, self._indices = csr.indptr.copy(), csr.indices.copy()
         self._rows = pattern.indices.tolist()
         self._cols = (keys // n).tolist()
-        self._permutation = _nested_dissection(pattern)
+        self._permutation = _nested_dissection(csr)
         self._matrix: Any = None
         self._symbolic: Any = None
 
