@@ -210,6 +210,7 @@ def interior_point(
     time_limit: float | None = None,
     initial: np.ndarray | None = None,
     warm_shift: float = 1e-2,
+    space: str = "auto",
 ) -> IterativeSolution:
     """Solve ``min ½‖ỹ‖² s.t. B̃ỹ ≥ b̃, l ≤ ỹ ≤ u`` (module docstring).
 
@@ -220,6 +221,11 @@ def interior_point(
         tolerance: stopping tolerance (module docstring).
         max_iterations: cap on iterations (default :data:`MAX_ITERATIONS`).
         time_limit: stop after this many seconds.
+        initial: (K,) contact impulses ``λ̃`` to start from (shifted into the interior by
+            ``warm_shift`` of the largest); None: Mehrotra's start.
+        space: the space of the Newton systems: ``"unknowns"`` (:class:`_InUnknowns`),
+            ``"contacts"`` (:class:`_InContacts`), or ``"auto"``: the unknowns, then the contacts
+            below :data:`UNKNOWNS_ACCURACY` (the default; the others are for measurements).
 
     Returns:
         :class:`~qpcontact.solvers.registry.IterativeSolution` with the best iterate (smallest
@@ -229,6 +235,8 @@ def interior_point(
         ``"infeasible"`` (a bound interval is empty).
     """
     check_options(tolerance, max_iterations, time_limit)
+    if space not in ("auto", "unknowns", "contacts"):
+        raise InvalidArgumentError(f"space: expected 'auto', 'unknowns' or 'contacts', got {space!r}")
     start = time.perf_counter()
     B = sp.csr_matrix(matrix)
     Bt = B.T.tocsr()
@@ -242,8 +250,9 @@ def interior_point(
     if np.any(lo > hi):
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
     cap = max_iterations or MAX_ITERATIONS
-    normal = _gram_matrix(B)
-    contact_matrix: GramMatrix | None = None
+    # The normal matrices in the unknowns and in the contacts, made when first needed.
+    normal: GramMatrix | None = None if space == "contacts" else _gram_matrix(B)
+    contact_matrix: GramMatrix | None = GramMatrix(Bt) if space == "contacts" else None
 
     # Start (Mehrotra's heuristic): the least-squares impulses of (B̃B̃ᵀ + I)λ = b̃, ỹ = B̃ᵀλ moved
     # inside the bounds (a hundredth of the interval), then impulses and slacks shifted to be
@@ -253,7 +262,11 @@ def interior_point(
     margin = np.where(has_lo & has_hi, 0.01 * (hi - lo), 0.01)
     if initial is None:
         # (B̃B̃ᵀ + I)⁻¹b̃ = b̃ − B̃(I + B̃ᵀB̃)⁻¹B̃ᵀb̃ (Woodbury), with the factorization of the unknowns
-        lam0 = b - B @ normal.factor(np.ones(k), np.ones(n))(Bt @ b)
+        if normal is not None:
+            lam0 = b - B @ normal.factor(np.ones(k), np.ones(n))(Bt @ b)
+        else:
+            assert contact_matrix is not None
+            lam0 = contact_matrix.factor(np.ones(n), np.ones(k))(b)
         y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
         s0 = B @ y - b
         lam0 = lam0 + max(-1.5 * float(lam0.min(initial=0.0)), 0.0)
@@ -289,14 +302,17 @@ def interior_point(
             break
         # Normal equations in the unknowns (the smaller and cheaper system) until the last
         # iterations of a tight solve, which need the stability of the contacts' (_InUnknowns).
-        in_contacts = error <= UNKNOWNS_ACCURACY and tolerance < UNKNOWNS_ACCURACY
+        in_contacts = space == "contacts" or (space == "auto" and error <= UNKNOWNS_ACCURACY
+                                              and tolerance < UNKNOWNS_ACCURACY)
         newton: _Newton = (_InContacts if in_contacts else _InUnknowns)(B, Bt, b, lo, hi, has_lo, has_hi, x,
                                                                           regularization)
         if in_contacts and contact_matrix is None:
             contact_matrix = GramMatrix(Bt)
+        matrix = contact_matrix if in_contacts else normal
+        assert matrix is not None
         while True:
             try:
-                newton.factor(contact_matrix if in_contacts and contact_matrix is not None else normal)
+                newton.factor(matrix)
                 break
             except ArithmeticError:  # a pivot lost to rounding: regularize more
                 regularization *= 100.0

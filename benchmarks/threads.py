@@ -1,0 +1,78 @@
+"""Does the position step gain from both cores? One and two BLAS threads, interleaved.
+
+Usage (from the repository root; the states are those ``qpcontact bench-grown`` caches)::
+
+    python benchmarks/threads.py ~/.cache/qpcontact-grown/2d-10000.npz \\
+        ~/.cache/qpcontact-grown/3d-5000.npz --repeats 3
+
+The only multithreaded part of a step is the BLAS inside CHOLMOD's supernodal factorization
+(OpenBLAS, bundled with cvxopt; its thread count is fixed when it loads, so each measurement is
+a child process with ``OPENBLAS_NUM_THREADS`` set). For each state, one position step from the
+state (``qpcontact simulate``'s defaults) is timed with 1 and with 2 threads, alternately,
+``--repeats`` times; the table gives the median wall seconds of the step and of its factorizations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+CHILD = r"""
+import json, sys, time
+import numpy as np
+import qpcontact.solvers.cholesky as cholesky
+from qpcontact.colony import load_colony
+from qpcontact.colony.settings import Settings
+from qpcontact.colony.simulate import step_function
+factor_seconds = []
+real = cholesky.GramMatrix.factor
+def timed(self, w, d):
+    t = time.perf_counter(); out = real(self, w, d); factor_seconds.append(time.perf_counter() - t); return out
+cholesky.GramMatrix.factor = timed
+colony, _ = load_colony(sys.argv[1])
+three_d = bool(np.any(colony.cells.centers[:, 2] != 0))
+settings = Settings().updated({"dimensions": 3 if three_d else 2}, "threads")
+drive = None
+if three_d and settings.model.sink_speed:
+    drive = np.zeros((colony.cells.n, 7)); drive[:, 2] = -settings.model.sink_speed * colony.cells.masses
+t = time.perf_counter()
+step_function(settings, {})(colony, settings.time_step_of(colony), drive=drive)
+print(json.dumps(dict(step=time.perf_counter() - t, factor=sum(factor_seconds), count=len(factor_seconds))))
+"""
+
+
+def measure(state: Path, threads: int) -> dict[str, float]:
+    environment = dict(os.environ, OPENBLAS_NUM_THREADS=str(threads), OMP_NUM_THREADS=str(threads))
+    done = subprocess.run([sys.executable, "-c", CHILD, str(state)], capture_output=True, text=True, env=environment,
+                          check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    parser.add_argument("states", nargs="+", type=Path)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    print(f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, load average "
+          f"{os.getloadavg()[0]:.2f}; medians of {args.repeats} steps each, interleaved.\n")
+    print("| state | BLAS threads | step [s] | factorizations [s] | factorizations |")
+    print("|---|---|---|---|---|")
+    for state in args.states:
+        runs: dict[int, list[dict[str, float]]] = {1: [], 2: []}
+        for _ in range(args.repeats):
+            for threads in (1, 2):
+                runs[threads].append(measure(state, threads))
+        for threads, rows in runs.items():
+            print(f"| {state.name} | {threads} | {np.median([r['step'] for r in rows]):.2f} | "
+                  f"{np.median([r['factor'] for r in rows]):.2f} | {int(rows[0]['count'])} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
