@@ -91,18 +91,17 @@ def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) 
                 peak_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
 
 
-#: The log-log slope of step time against cells is fitted from this many cells on (the target of
-#: issue 22: 2·10³ to 2·10⁴ in 2D), to the largest size of the run.
-SLOPE_FROM = 2000
+#: The log-log slope of step time against cells is fitted over the steps in this range of colony
+#: sizes (the target of issue 22: 2·10³ to 2·10⁴ cells in 2D), or up to the run's largest size.
+SLOPE_RANGE = (2000, 20000)
 
 
 def step_time_slope(cells: np.ndarray, seconds: np.ndarray, sizes: list[int]) -> float:
     """The slope of ``log(step seconds)`` against ``log(cells)`` over the steps of a growth run
-    from :data:`SLOPE_FROM` cells to the largest of ``sizes`` (least squares; NaN with fewer
-    than 5 such steps or a range of less than a doubling). Each step's size is the colony's
-    after it."""
+    with colony sizes in :data:`SLOPE_RANGE` (least squares; NaN with fewer than 5 such steps or
+    a range of less than a doubling). Each step's size is the colony's after it."""
     cells, seconds = np.asarray(cells, float), np.asarray(seconds, float)
-    use = (cells >= SLOPE_FROM) & (cells <= max(sizes)) & (seconds > 0)
+    use = (cells >= SLOPE_RANGE[0]) & (cells <= min(SLOPE_RANGE[1], max(sizes))) & (seconds > 0)
     if use.sum() < 5 or cells[use].max() < 2 * cells[use].min():
         return float("nan")
     return float(np.polyfit(np.log(cells[use]), np.log(seconds[use]), 1)[0])
@@ -202,7 +201,7 @@ def markdown(growth: list[dict[str, Any]], steps: list[dict[str, Any]], peer: di
     lines = [f"Measured {meta['date']} on {meta['machine']}; `{meta['command']}`.", "",
              "**Time to grow from one cell** (wall seconds until the colony first has that many cells):", "",
              "| dims | step | " + " | ".join(f"{s:,}" for s in sizes) + " | steps | linearizations | largest overlap "
-             f"| colony doubling / cells' own | peak memory | slope of step time ({SLOPE_FROM:,}+ cells) |",
+             f"| colony doubling / cells' own | peak memory | slope of step time ({SLOPE_RANGE[0]:,}–{SLOPE_RANGE[1]:,} cells) |",
              "|---|---|" + "---|" * len(sizes) + "---|---|---|---|---|---|"]
     for r in growth:
         if "error" in r and r.get("reached") is None:
