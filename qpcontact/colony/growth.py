@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import flag, number, real_array
+from ..checks import flag, instance, integer, integer_array, number, real_array
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Plane, capsule_volume
 from .position import ContactImpulses, PositionSettings, PositionStepResult, position_step
@@ -63,14 +63,19 @@ class Colony:
     next_id: int = -1
 
     def __post_init__(self) -> None:
+        instance("Colony.cells", self.cells, Cells, "qpcontact.Cells")
         n = self.cells.n
-        for name, dtype in (("ids", np.int64), ("parent_ids", np.int64), ("rates", float), ("owed", float)):
-            arr = np.asarray(getattr(self, name), dtype=dtype)
+        for name in ("ids", "parent_ids", "rates", "owed"):
+            value = getattr(self, name)
+            arr = (integer_array(f"Colony.{name}", value) if name.endswith("ids")
+                   else real_array(f"Colony.{name}", value, InvalidArgumentError))
             if name == "owed" and arr.ndim == 0:
                 arr = np.full(n, float(arr))
             if arr.shape != (n,):
-                raise InvalidArgumentError(f"Colony.{name}: expected shape ({n},), got {arr.shape}")
+                raise InvalidArgumentError(f"Colony.{name}: expected shape ({n},) (one per cell), got {arr.shape}")
             object.__setattr__(self, name, arr)
+        object.__setattr__(self, "time", number("Colony.time", self.time))
+        object.__setattr__(self, "next_id", integer("Colony.next_id", self.next_id))
         for name in ("rates", "owed"):
             arr = getattr(self, name)
             if not np.all(np.isfinite(arr)) or np.any(arr < 0):
@@ -91,9 +96,13 @@ class Colony:
 
     @classmethod
     def founder(cls, cells: Cells, rates: Any) -> Colony:
-        """A colony of founder cells (ids 0..N-1, no parents) growing at ``rates`` [1/time]."""
-        rates = np.broadcast_to(np.asarray(rates, dtype=float), (cells.n,))
-        return cls(cells, np.arange(cells.n), np.full(cells.n, -1), rates)
+        """A colony of founder cells (ids 0..N-1, no parents) growing at ``rates`` [1/time]: one
+        rate for all, or one per cell."""
+        instance("cells", cells, Cells, "qpcontact.Cells")
+        rates = real_array("rates", rates, InvalidArgumentError)
+        if rates.shape not in ((), (cells.n,)):
+            raise InvalidArgumentError(f"rates: expected one rate or {cells.n} (one per cell), got shape {rates.shape}")
+        return cls(cells, np.arange(cells.n), np.full(cells.n, -1), np.broadcast_to(rates, (cells.n,)))
 
     def replace(self, **changes: Any) -> Colony:
         """A new, validated Colony with some fields replaced."""
@@ -310,7 +319,14 @@ def expansion_time_step(colony: Colony, *, max_dt: float, cfl: float = 0.2, dime
     the speed is estimated from the geometry, not from the last step's velocities (those include
     the position-correction speeds ``β·overlap/dt``, which would feed back into ``dt``).
     """
+    instance("colony", colony, Colony, "qpcontact.Colony")
+    max_dt = number("max_dt", max_dt, minimum=0.0, open_minimum=True)
+    cfl = number("cfl", cfl, minimum=0.0, open_minimum=True)
+    if dimensions not in (2, 3):
+        raise InvalidArgumentError(f"dimensions: expected 2 or 3, got {dimensions!r}")
     cells = colony.cells
+    if cells.n == 0:  # nothing grows or moves
+        return max_dt
     reach = np.linalg.norm(cells.centers - cells.centers.mean(axis=0), axis=1) + cells.lengths / 2 + cells.radii
     speed = float(colony.rates.max(initial=0.0)) * float(reach.max()) / dimensions
     diameter = 2.0 * float(np.median(cells.radii))

@@ -13,11 +13,29 @@ function (re-exported at the top level); import the modules with
 """
 
 from . import metrics
-from .resolve import ACCEPT_CAP, ACCEPT_FACTOR, Result, acceptance_failure, acceptance_limit, resolve, solve_system
-from .validation import ACTIVE_THRESHOLD, Agreement, active_set_polish, compare_with_linear, reference_solution
+from .resolve import (
+    ACCEPT_CAP,
+    ACCEPT_FACTOR,
+    Result,
+    acceptance_failure,
+    acceptance_limit,
+    certified,
+    resolve,
+    solve_system,
+)
+from .validation import (
+    ACTIVE_THRESHOLD,
+    Agreement,
+    Reference,
+    UnverifiedReferenceWarning,
+    active_set_polish,
+    compare_with_linear,
+    reference,
+    reference_solution,
+)
 
 __all__ = [
-    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Result", "acceptance_failure", "acceptance_limit",
-    "active_set_polish",
-    "compare_with_linear", "metrics", "reference_solution", "resolve", "solve_system",
+    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Reference", "Result", "UnverifiedReferenceWarning",
+    "acceptance_failure", "acceptance_limit", "active_set_polish", "certified", "compare_with_linear", "metrics",
+    "reference", "reference_solution", "resolve", "solve_system",
 ]
