@@ -23,6 +23,7 @@ Imports the geometry, assembly, solvers and resolve wings only.
 
 from .growth import (
     Colony,
+    daughters_share,
     divide,
     expansion_time_step,
     grow,
@@ -41,7 +42,7 @@ from .step import StepResult, advance, largest_overlap, overlap_fractions, rotat
 
 __all__ = [
     "Colony", "ContactImpulses", "PositionSettings", "PositionStepResult", "Run", "RunFolder", "Settings", "Snapshot",
-    "StepControl", "StepOutcome", "StepResult", "advance", "divide", "expansion_time_step", "grow", "grow_position",
+    "StepControl", "StepOutcome", "StepResult", "advance", "daughters_share", "divide", "expansion_time_step", "grow", "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",
     "overlap_fractions", "position_step", "push", "rotate", "run_colony", "save_colony", "step", "volumes",
 ]

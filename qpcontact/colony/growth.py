@@ -214,6 +214,32 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
     )
 
 
+def daughters_share(values: np.ndarray, before: Colony, after: Colony) -> np.ndarray:
+    """Per-cell rows of ``before`` (e.g. a model hook's drive, (N, ...)) for the cells of
+    ``after = divide(before, ...)``: a mother's row is halved between her two daughters (as
+    :func:`divide` halves her momenta: a drive ``m·v`` then still moves each daughter at ``v``);
+    other cells keep theirs.
+
+    Raises:
+        InvalidArgumentError: ``values`` has no row per cell of ``before``, or ``after`` is not a
+            division of ``before``.
+    """
+    values = np.asarray(values, dtype=float)
+    n = before.cells.n
+    if values.shape[:1] != (n,):
+        raise InvalidArgumentError(f"values: expected one row per cell ({n}), got shape {values.shape}")
+    if after is before:
+        return values
+    # divide puts daughter 1 in her mother's place under a new id and appends daughter 2, in order
+    dividing = np.flatnonzero(after.ids[:n] != before.ids) if after.cells.n >= n else np.zeros(0, dtype=np.intp)
+    if after.cells.n != n + dividing.size:
+        raise InvalidArgumentError(f"after: {after.cells.n} cells are not a division of {n} ({dividing.size} mothers)")
+    half = values[dividing] / 2
+    out = values.copy()
+    out[dividing] = half
+    return np.concatenate([out, half])
+
+
 def _grown(colony: Colony, before: Cells, after: Cells, paid: np.ndarray, dt: float) -> Colony:
     """The colony after a growth step that took ``before`` to ``after``: masses and growth
     inertias grown with the volume including what is owed (constant density), the owed length
@@ -227,8 +253,8 @@ def _grown(colony: Colony, before: Cells, after: Cells, paid: np.ndarray, dt: fl
 
 def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.ndarray | None = None,
          **step_options: Any) -> tuple[Colony, StepResult]:
-    """One growth step with the velocity-level :func:`qpcontact.colony.step` (no division; call
-    :func:`divide` after it).
+    """One growth step with the velocity-level :func:`qpcontact.colony.step` (no division: call
+    :func:`divide` before it, so that the step's contact solve sees the daughters).
 
     The growth drive (:func:`growth_drive` of :func:`growth_step`) enters as the growth momentum
     — overdamped, as the growth column of ``drive``; inertial, by setting ``g`` (growth is a
@@ -266,7 +292,8 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
                   planar: bool | None = None, settings: PositionSettings | None = None,
                   warm: ContactImpulses | None = None, on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
     """One growth step with the position-level :func:`qpcontact.colony.position_step`
-    (overdamped; no division: call :func:`divide` after it).
+    (overdamped; no division: call :func:`divide` before it, so that the step clears the
+    overlap the daughters' axis noise makes and the state it returns keeps its tolerance).
 
     The growth drive of :func:`growth_step` is the growth column of ``drive`` (user-given
     momenta in the other columns); after the step, masses and growth inertias grow with the

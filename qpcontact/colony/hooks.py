@@ -44,10 +44,13 @@ class StepControl:
             (the sink towards the substrate in 3D), in momentum units [mass·µm/doubling time].
             In the overdamped dynamics of ``qpcontact simulate`` a cell without contacts then
             moves at ``p/m``: to push cell i at velocity v, ``drive[i, :3] = masses[i] * v``
-            (:func:`push`). The growth column is ignored (growth is set by ``rates``).
-        division_length: the length [µm] at which each cell divides after this step: a number
-            or an (N,) array (None: the run's ``division_length``). Daughters need
-            ``l/2 > radius``.
+            (:func:`push`). The growth column is ignored (growth is set by ``rates``). A cell
+            that divides at the start of this step gives each daughter half of its row (as its
+            momenta and mass: a pushed mother's daughters move at her velocity).
+        division_length: the length [µm] at which each cell of the colony given divides, at the
+            start of this step (before it moves: the step's contact solve then clears the
+            daughters' overlap): a number or an (N,) array (None: the run's
+            ``division_length``). Daughters need ``l/2 > radius``.
     """
 
     colony: Colony | None = None

@@ -3,8 +3,10 @@
 Units: lengths in µm (cells of radius 0.5 µm dividing at a cylinder length of 4 µm), time in
 mean doubling times (growth rate ln 2), masses in arbitrary units (mass = volume, growth inertia
 ``G`` = ``--growth-inertia`` × mass). Every step: the model hook, if any
-(:mod:`qpcontact.colony.hooks`), then the run's step function (:func:`step_function`), then
-:func:`qpcontact.colony.divide`. Two steps (``--step``):
+(:mod:`qpcontact.colony.hooks`), then :func:`qpcontact.colony.divide` (every cell that reached its
+division length), then the run's step function (:func:`step_function`), whose contact solve
+clears the overlap the daughters' axis noise made: every state a run saves or returns is the end
+of a step, within its overlap tolerance. Two steps (``--step``):
 
 - ``position`` (default): :func:`qpcontact.colony.grow_position`, non-penetration at the end of
   the step (:mod:`qpcontact.colony.position`), with a time step set by growth
@@ -56,7 +58,7 @@ from ..errors import InvalidArgumentError, ModelHookError, QPContactError, Solve
 from ..geometry import Cells, capsule_volume
 from ..geometry.surfaces import substrate
 from ..solvers import FORMS, QP_FORMULATIONS, available_solvers, get_solver
-from .growth import Colony, divide, expansion_time_step, grow, grow_position, growth_time_step
+from .growth import Colony, daughters_share, divide, expansion_time_step, grow, grow_position, growth_time_step
 from .hooks import Hook, apply_hook, load_hook, push
 from .position import ContactImpulses, PositionSettings, PositionStepResult
 from .runs import HISTORY_FIELDS, Interrupt, RunFolder, is_inside, latest_snapshot, read_toml
@@ -361,7 +363,14 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> 
     in 3D, the planar unknowns in 2D, the contact impulses of each step kept in ``extra`` as the
     next one's warm start (and so restored on resume). A step that does not reach the overlap
     tolerance is retried with half the step, up to ``max_halvings`` times; the last failure is
-    raised (:class:`~qpcontact.errors.StepFailedError`), never applied."""
+    raised (:class:`~qpcontact.errors.StepFailedError`), never applied.
+
+    The state a step ends in keeps the overlap tolerance unless overlap present at its start
+    exceeded what ``relaxation`` clears in one step (a division's axis noise turning a daughter
+    into a neighbour by more than 0.05 of a diameter, or a state from elsewhere): such a step is
+    taken once more with the relaxation raised to that start overlap, so that it clears it
+    (turning still bounded by ``turn_limit``); if that fails, the first step stands and the
+    history shows its overlap."""
     position = settings.position_settings()
     planar = settings.dimensions == 2
     planes = [] if planar else [substrate(0.0)]
@@ -377,6 +386,13 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> 
                     raise
                 dt /= 2.0
                 continue
+            if out.max_overlap > position.overlap_tolerance and out.start_overlap > position.relaxation:
+                clearing = dataclasses.replace(position, relaxation=out.start_overlap)
+                try:
+                    grown, out = grow_position(colony, dt, drive=drive, planes=planes,
+                                               planar=True if planar else None, settings=clearing, warm=warm)
+                except StepFailedError:
+                    pass  # the first answer stands: converged, only above the bound
             extra.update({f"warm.{name}": getattr(out.warm, name) for name in WARM_ARRAYS})
             return StepOutcome(grown, out, dt, attempt)
         raise AssertionError("unreachable")
@@ -474,14 +490,19 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
                 with interrupt.armed():  # a signal now abandons the step: nothing of it is applied
                     control = apply_hook(hook, colony, step)
                     current = colony if control.colony is None else control.colony
-                    dt = settings.time_step_of(current)
-                    drive = push(current, [0.0, 0.0, -settings.sink_speed]) if not planar and settings.sink_speed else None
-                    if control.drive is not None:
-                        drive = control.drive if drive is None else drive + control.drive
-                    outcome = take_step(current, dt, drive=drive)
-                    divided = divide(outcome.colony, settings.division_length if control.division_length is None
+                    # Division first, so that the overlap its axis noise makes is cleared by this
+                    # step's contact solve: every state the run saves or returns is one a step
+                    # ended in (issue 19: dividing after the step left 0.047 of a diameter in the
+                    # snapshots of a run whose steps keep 0.01).
+                    divided = divide(current, settings.division_length if control.division_length is None
                                      else control.division_length, rng, axis_noise=settings.axis_noise,
                                      rate_noise=settings.rate_noise, base_rate=settings.rate, planar=planar)
+                    dt = settings.time_step_of(divided)
+                    drive = push(divided, [0.0, 0.0, -settings.sink_speed]) if not planar and settings.sink_speed else None
+                    if control.drive is not None:
+                        shared = daughters_share(control.drive, current, divided)
+                        drive = shared if drive is None else drive + shared
+                    outcome = take_step(divided, dt, drive=drive)
             except KeyboardInterrupt:
                 rng.bit_generator.state = rng_state
                 extra.clear()
@@ -497,7 +518,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
                 error, exception = f"{where}: step not applied: {exc}", exc
                 break
-            colony = divided
+            colony = outcome.colony
             row = history_row(step, colony, outcome, time.perf_counter() - t0)
             for name in HISTORY_FIELDS:
                 history[name].append(row[name])
