@@ -171,3 +171,14 @@ def wait_for(condition, what: str, timeout: float):
             return value
         time.sleep(0.05)
     raise TimeoutError(f"timed out waiting for {what}")
+
+
+def default_signals() -> None:
+    """``preexec_fn`` of a child that a test signals: SIGINT and SIGTERM at their defaults, as in a
+    terminal. A child inherits an *ignored* SIGINT (something earlier in the test process, such as
+    a multiprocessing or Dask helper, may have ignored it) and Python then installs no
+    KeyboardInterrupt handler: the child would not hear Ctrl-C at all."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)

@@ -19,7 +19,7 @@ from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder, read
 from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.colony.snapshots import load_snapshot
 from qpcontact.errors import OutputFolderError
-from tests.helpers import gate_model, wait_for
+from tests.helpers import default_signals, gate_model, wait_for
 
 #: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
 SETTINGS = Settings(n_cells=10**6, dimensions=3, max_dt=0.1, growth_per_step=0.1, max_steps=48)
@@ -81,7 +81,7 @@ def held_run(tmp_path, step, *argv):
     out = tmp_path / "run"
     process = subprocess.Popen([sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out),
                                 "--quiet", "--max-dt", "0.1", "--model", str(gate), *argv],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
     try:
         wait_for(lambda: (tmp_path / "held").exists() or process.poll() is not None, "the run held at its gate", 120)
     except BaseException:

@@ -22,7 +22,7 @@ from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
 from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.studies import cluster, harness, sweep
-from tests.helpers import gate_model, wait_for
+from tests.helpers import default_signals, gate_model, wait_for
 
 distributed = pytest.importorskip("distributed")
 
@@ -206,7 +206,7 @@ def test_failed_runs_are_reported_by_name_with_their_error_and_resume_redoes_onl
 
 def _sweep_process(argv: list[str], log: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "qpcontact", "sweep", "--quiet", *argv], cwd=ROOT,
-                            stdout=log.open("w"), stderr=subprocess.STDOUT)
+                            stdout=log.open("w"), stderr=subprocess.STDOUT, preexec_fn=default_signals)
 
 
 @pytest.mark.slow
