@@ -30,11 +30,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
     args = parser.parse_args(argv)
 
-    settings = Settings(n_cells=args.cells, dimensions=3)
+    settings = Settings().updated({"cells": args.cells, "dimensions": 3, "snapshot_every": args.every, "vtk": True})
     folder = RunFolder.create(args.out, overwrite=args.overwrite, vtk=True)  # checked before the run
-    folder.write_config(settings.to_dict())
-    run = run_colony(settings, folder=folder, snapshot_every=args.every, progress=False)
-    planes = settings.step_options()["planes"]  # the substrate
+    folder.write_config(settings.to_tables(applying=True))
+    run = run_colony(settings, folder=folder, progress=False)
+    planes = settings.planes()  # the substrate
     folder.note(save_colony_picture(args.out / "colony.png", run.colony.cells, f"{run.colony.cells.n} cells",
                                     side_view=True, planes=planes))
     height = (run.colony.cells.centers[:, 2] + run.colony.cells.radii).max()

@@ -33,11 +33,11 @@ def main(argv: list[str] | None = None) -> int:
     walls = qc.channel(args.width)
     options = {**settings.step_options(), "planes": walls}
     colony = simulate.founder(settings)  # one cell at the origin, along x
-    rng = np.random.default_rng(settings.seed)
+    rng = np.random.default_rng(settings.run.seed)
     while colony.cells.n < args.cells:
-        colony = qc.divide(colony, settings.division_length, rng, axis_noise=settings.axis_noise,
-                           rate_noise=settings.rate_noise, base_rate=settings.rate, planar=True)
-        dt = qc.expansion_time_step(colony, max_dt=settings.max_dt, cfl=settings.cfl)
+        colony = qc.divide(colony, settings.model.division_length, rng, axis_noise=settings.model.axis_noise,
+                           rate_noise=settings.model.rate_noise, base_rate=settings.model.rate, planar=True)
+        dt = qc.expansion_time_step(colony, max_dt=settings.run.max_dt, cfl=settings.run.cfl)
         colony, out = qc.grow(colony, dt, **options)
     cells = colony.cells
     half = 0.5 * cells.lengths[:, None] * cells.axes
@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     picture = plots.save_colony_picture(args.out / "channel.png", cells, f"{cells.n} cells in a {args.width:g} µm channel",
                                         planes=walls)
     print(f"wrote {picture}")
-    return 0 if reach.max() <= args.width / 2 + 0.02 * 2 * settings.radius else 1
+    return 0 if reach.max() <= args.width / 2 + 0.02 * 2 * settings.model.radius else 1
 
 
 if __name__ == "__main__":

@@ -2,7 +2,7 @@
 scripts do).
 
 ``hook(colony, step)`` is called at the start of every step of ``qpcontact simulate`` (with
-``--model examples/model_hook.py``) or of ``qpcontact.colony.run_colony(..., hook=hook)``. Here:
+``--hook examples/model_hook.py``) or of ``qpcontact.colony.run_colony(..., hook=hook)``. Here:
 
 - **growth rates**: nutrients run short inside the colony, so a cell grows at
   ``ln 2 · (0.3 + 0.7 r/R)``, ``r`` its distance from the colony's centre and ``R`` the largest;
@@ -14,7 +14,7 @@ Random numbers come from a generator seeded by the cell's id, so the hook gives 
 whenever it is asked: a run resumed from a snapshot (``--resume``) continues exactly.
 
     python examples/model_hook.py [--cells 150] [--out model-out]
-    qpcontact simulate --model examples/model_hook.py --cells 150
+    qpcontact simulate --hook examples/model_hook.py --cells 150
 """
 
 from __future__ import annotations
@@ -55,10 +55,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
     args = parser.parse_args(argv)
 
-    settings = Settings(n_cells=args.cells, model=str(Path(__file__).resolve()))  # saved with the run
+    settings = Settings().updated({"cells": args.cells, "hook": str(Path(__file__).resolve())})  # saved with the run
     folder = RunFolder.create(args.out, overwrite=args.overwrite)
-    folder.write_config(settings.to_dict())
-    run = run_colony(settings, folder=folder, progress=False)  # the hook comes from settings.model
+    folder.write_config(settings.to_tables(applying=True))
+    run = run_colony(settings, folder=folder, progress=False)  # the hook comes from settings.model.hook
     colony = run.colony
     swimmers = per_cell(colony.ids, salt=2) < 0.5
     x = colony.cells.centers[:, 0]

@@ -5,13 +5,27 @@ Data flow, one wing each (a wing imports only from itself and the wings before i
 :mod:`~qpcontact.assembly` (:func:`build_system`) → :mod:`~qpcontact.solvers` (one registry:
 the plain linear solve, MPRGP, every qpsolvers backend) → :mod:`~qpcontact.resolve`
 (:func:`resolve`, one call per step, every answer checked → :class:`Result`) →
-:mod:`~qpcontact.colony` (:func:`step`, :func:`grow`, :class:`Colony`, snapshots). The studies
+:mod:`~qpcontact.colony` (:func:`step`, :func:`grow`, :class:`Colony`, snapshots; the stress and
+pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`). The studies
 (:mod:`qpcontact.studies`: scenes, catalogue, comparison, stability, benchmark, demo) sit on
 top and are not imported here. docs/architecture.md describes the layout.
 """
 
 from .assembly import ContactSystem, build_system
-from .colony import Colony, StepResult, divide, expansion_time_step, grow, load_colony, save_colony, step
+from .colony import (
+    Colony,
+    StepResult,
+    cell_forces,
+    cell_pressure,
+    cell_stress,
+    divide,
+    expansion_time_step,
+    grow,
+    load_colony,
+    pressure_growth_rate,
+    save_colony,
+    step,
+)
 from .errors import (
     InvalidArgumentError,
     InvalidCellsError,
@@ -22,7 +36,7 @@ from .errors import (
     UnknownSolverError,
 )
 from .geometry import Cells, Contacts, Plane, channel, colliding, concatenate, find_contacts, plane_contacts, substrate
-from .resolve import Agreement, Result, compare_with_linear, reference_solution, resolve, solve_system
+from .resolve import Agreement, Result, SystemSolution, compare_with_linear, reference_solution, resolve, solve_system
 from .solvers import FORMS, FORMULATIONS, SolverSpec, available_solvers, get_solver
 
 __version__ = "0.1.0"
@@ -30,8 +44,9 @@ __version__ = "0.1.0"
 __all__ = [
     "FORMS", "FORMULATIONS", "Agreement", "Cells", "Colony", "ContactSystem", "Contacts", "InvalidArgumentError",
     "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
-    "SolverSpec", "StepResult", "TooManyContactsError", "UnknownSolverError", "available_solvers", "build_system", "channel", "colliding",
+    "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
+    "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
     "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
-    "load_colony", "plane_contacts", "reference_solution", "resolve", "save_colony", "solve_system", "step",
+    "load_colony", "plane_contacts", "pressure_growth_rate", "reference_solution", "resolve", "save_colony", "solve_system", "step",
     "substrate",
 ]

@@ -6,7 +6,7 @@ the common flags.
 - value types that reject what no run can use, each naming the flag and the value:
   :func:`positive_int`, :func:`non_negative_int`, :func:`positive_float`,
   :func:`non_negative_float`, :func:`comma_list` (comma-separated lists, the one list syntax of
-  every command), :func:`on_off`;
+  every command), :func:`on_off`, :func:`output_folder`;
 - :func:`add_output_arguments`: ``--out`` (a folder, by default ``./<command>-out/``) and
   ``--overwrite``;
 - :func:`run_standalone`: a command's ``main(argv)`` (``python -m`` and the tests) with the same
@@ -110,9 +110,16 @@ def on_off(text: str) -> bool:
         raise argparse.ArgumentTypeError(f"expected on or off, got {text!r}") from None
 
 
+def output_folder(text: str) -> Path:
+    """An output folder: a path that is not empty (``--out ''`` would be the current directory)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a folder, got an empty path (use --out . for the current directory)")
+    return Path(text)
+
+
 def add_output_arguments(parser: argparse.ArgumentParser, command: str, what: str) -> None:
     """``--out FOLDER`` (default ``./<command>-out``) and ``--overwrite``."""
-    parser.add_argument("--out", type=Path, default=Path(f"{command}-out"), metavar="FOLDER",
+    parser.add_argument("--out", type=output_folder, default=Path(f"{command}-out"), metavar="FOLDER",
                         help=f"output folder for {what} (default: ./{command}-out); created if needed, checked "
                              "before the work starts")
     parser.add_argument("--overwrite", action="store_true",

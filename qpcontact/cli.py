@@ -26,7 +26,7 @@ COMMANDS = {
     "bench-grown": ("qpcontact.studies.grown", "time to grow a colony from one cell, and one step of a grown colony, "
                     "for each step kind (the benchmark that counts)"),
     "bench": ("qpcontact.studies.bench", "time each phase of a step on colony snapshots"),
-    "sweep": ("qpcontact.studies.sweep", "replicates and parameter sweeps of colony runs, as tasks on Dask"),
+    "sweep": ("qpcontact.colony.sweep", "replicates and parameter sweeps of colony runs, as tasks on Dask"),
 }
 
 

@@ -12,12 +12,15 @@ Every command that writes files (``qpcontact simulate``, ``compare``, ``stabilit
    killed while writing leaves the old file or the new one, never a truncated one;
 3. prints what it wrote (:func:`describe_written`).
 
+Tables go to CSV through :func:`write_csv` (one row per run, floats to fixed significant digits).
+
 Standard library only; importable from every wing (like :mod:`qpcontact.errors`).
 """
 
 from __future__ import annotations
 
 import contextlib
+import csv
 import os
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -130,3 +133,20 @@ def describe_written(paths: Iterable[str | Path], *, group_above: int = 3) -> st
         else:
             lines += [f"  {p}" for p in members]
     return "wrote:\n" + "\n".join(lines) if lines else "wrote no files"
+
+
+def write_csv(rows: Iterable[dict[str, Any]], path: Path, columns: Sequence[str], digits: int) -> None:
+    """The rows as CSV with these columns (missing values and None empty, floats to ``digits``
+    significant digits, everything else as ``str``)."""
+    def text(value: Any) -> str:
+        if value is None:
+            return ""
+        if isinstance(value, float):
+            return f"{value:.{digits}g}"
+        return str(value)
+
+    with Path(path).open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(columns), extrasaction="ignore")
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: text(row.get(k)) for k in columns})

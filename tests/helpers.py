@@ -127,7 +127,7 @@ def interrupt_on_call(monkeypatch: pytest.MonkeyPatch, module: object, name: str
 
 
 def gate_model(folder: Path, step: int, *, stop_flag: Path | None = None, skip_first: bool = False) -> Path:
-    """A model file (``--model``) whose hook holds a run at a known step, so that a test can
+    """A model hook file (``--hook``) whose hook holds a run at a known step, so that a test can
     signal or kill it there instead of racing a signal against the machine's speed.
 
     At step ``step`` the hook writes ``folder/"held"`` (with the process id) and waits: until

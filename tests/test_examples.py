@@ -4,8 +4,6 @@ here) and does what it says. Only the output folder is given (a temporary one)."
 from __future__ import annotations
 
 import importlib.util
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -26,8 +24,8 @@ def run_example(name: str, *argv: str) -> int:
 
 
 def test_every_example_is_tested():
-    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "performance_ab",
-              "foreign_state"}
+    tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "foreign_state",
+              "pressure_growth"}
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
 
 
@@ -80,15 +78,18 @@ def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
     assert run_example("model_hook", "--out", str(tmp_path / "script")) == 0
     from qpcontact.cli import main
 
-    assert main(["simulate", "--model", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
+    assert main(["simulate", "--hook", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),
                  "--quiet"]) == 0
 
 
-def test_the_before_after_timing_runs_against_a_checkout():
-    """(It re-imports qpcontact from another folder, so it runs in its own process; here the
-    "old" checkout is this one.)"""
-    done = subprocess.run([sys.executable, str(EXAMPLES / "performance_ab.py"), str(ROOT), "--sizes", "200",
-                           "--dimensions", "2", "--repeats", "1", "--cache-dir", "none", "--solvers", "osqp/contact"],
-                          capture_output=True, text=True, timeout=120)
-    assert done.returncode == 0, done.stderr
-    assert "| 2D | 200 | detect |" in done.stdout and "| True |" in done.stdout
+def test_the_pressure_growth_example_stalls_the_inside_and_runs_as_a_model(tmp_path, capsys):
+    assert run_example("pressure_growth", "--cells", "40", "--stall-pressure", "5", "--out", str(tmp_path / "script")) == 0
+    free, slowed = [line for line in capsys.readouterr().out.splitlines() if " cells at t = " in line]
+    time = [float(line.split("t = ")[1].split()[0]) for line in (free, slowed)]
+    largest = [float(line.split("(median) ")[1].split()[0]) for line in (free, slowed)]
+    assert time[1] > time[0] and largest[1] < largest[0]  # slower to 40 cells, and less squeezed
+    assert (tmp_path / "script" / "pressure.png").stat().st_size > 1000
+    from qpcontact.cli import main
+
+    assert main(["simulate", "--hook", str(EXAMPLES / "pressure_growth.py"), "--cells", "6", "--out",
+                 str(tmp_path / "cli"), "--quiet"]) == 0

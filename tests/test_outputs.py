@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import csv
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from qpcontact.errors import OutputFolderError
-from qpcontact.outputs import atomic_write, describe_written, prepare_folder, write_text
+from qpcontact.outputs import atomic_write, describe_written, prepare_folder, write_csv, write_text
 
 
 def test_a_folder_that_cannot_be_written_is_refused_before_any_work(tmp_path):
@@ -78,3 +80,12 @@ def test_what_was_written_is_listed_and_grouped(tmp_path):
     assert text.splitlines()[0] == "wrote:" and f"  {tmp_path / 'history.csv'}" in text
     assert "4 .npz files (step_000010.npz ... step_000040.npz)" in text
     assert describe_written([]) == "wrote no files"
+
+
+def test_write_csv_formats_floats_and_leaves_missing_values_empty(tmp_path):
+    path = tmp_path / "rows.csv"
+    rows = [{"a": 1.0 / 3.0, "b": None, "c": True, "extra": "dropped"}, {"a": np.float64(2.5e-7), "c": 3}]
+    write_csv(rows, path, ("a", "b", "c"), digits=3)
+    with path.open(newline="") as fh:
+        read = list(csv.DictReader(fh))
+    assert read == [{"a": "0.333", "b": "", "c": "True"}, {"a": "2.5e-07", "b": "", "c": "3"}]

@@ -68,11 +68,14 @@ def test_the_layout_rule_is_checked_on_the_real_imports():
     assert _wing_of("qpcontact.studies.compare") == "studies" and _wing_of("qpcontact.errors") is None
 
 
-def test_importing_qpcontact_leaves_out_the_studies_and_plotting():
+def test_importing_qpcontact_leaves_out_the_studies_the_baselines_and_plotting():
     code = ("import sys, qpcontact; print(sorted(m for m in sys.modules if m.startswith(('qpcontact.studies', "
-            "'matplotlib', 'tqdm'))))")
+            "'qpcontact.solvers.baselines', 'matplotlib', 'tqdm'))))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
     assert out.stdout.strip() == "[]"
+    code = "import qpcontact, sys; qpcontact.get_solver('bbpgd'); print('qpcontact.solvers.baselines' in sys.modules)"
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert loaded.stdout.strip() == "True"  # loaded when asked for by name
 
 
 def test_public_api_of_the_readme_and_the_wings():
@@ -103,7 +106,7 @@ def test_documents_name_files_and_tests_that_exist(document):
     module path a document names exists (so that a move cannot leave stale paths behind)."""
     text = document.read_text()
     missing = []
-    for path, test in re.findall(r"\b((?:qpcontact|tests|examples)/[\w/]+\.py)(?:::(\w+))?", text):
+    for path, test in re.findall(r"\b((?:qpcontact|tests|examples|benchmarks)/[\w/]+\.py)(?:::(\w+))?", text):
         if not (ROOT / path).exists():
             missing.append(path)
         elif test and not re.search(rf"def {test}\b", (ROOT / path).read_text()):
@@ -198,6 +201,38 @@ def test_the_path_check_finds_what_is_missing(tmp_path):
     assert _slug("The position-level step (issue 12)") == "the-position-level-step-issue-12"
 
 
+def architecture_tree() -> set[str]:
+    """The package's modules that docs/architecture.md's tree lists: each line is an entry (a
+    name, or names separated by commas, indented two spaces a level) and its description after
+    two spaces; lines indented to the description column continue a description."""
+    block = (ROOT / "docs" / "architecture.md").read_text().split("```\n", 2)[1]
+    listed, folders = set(), []
+    for line in block.splitlines():
+        indent = len(line) - len(line.lstrip(" "))
+        if indent >= 20 or not line.strip():
+            continue
+        names = re.match(r"([\w./]+(?:, [\w./]+)*)(?:\s{2,}|$)", line.strip())
+        assert names, f"not an entry of the tree: {line!r}"
+        del folders[indent // 2:]
+        for name in names.group(1).split(", "):
+            if name.endswith("/"):
+                folders.append(name.rstrip("/"))
+            elif folders and folders[0] == "qpcontact":
+                listed.add("/".join([*folders, name]))
+    return listed
+
+
+def test_the_architecture_tree_lists_every_module_and_only_those():
+    """docs/architecture.md's tree is the package: a module added, moved or removed without it
+    fails here (the sub-packages' __init__.py are their folder lines)."""
+    modules = {str(p.relative_to(ROOT)) for p in PACKAGE.rglob("*.py")
+               if p.name != "__init__.py" or p.parent == PACKAGE}
+    listed = architecture_tree()
+    assert not modules - listed, f"modules missing from docs/architecture.md: {sorted(modules - listed)}"
+    assert not listed - modules, f"docs/architecture.md lists modules that do not exist: {sorted(listed - modules)}"
+    assert {"qpcontact/described.py", "qpcontact/colony/settings.py", "qpcontact/colony/sweep.py"} <= listed
+
+
 def test_cli_lists_commands_and_rejects_unknown_ones(capsys):
     assert cli.main(["--help"]) == 0
     listing = capsys.readouterr().out
@@ -233,6 +268,19 @@ def test_scs_is_an_extra_not_a_base_dependency():
     assert not [d for d in project["dependencies"] if d.lower().startswith("scs")]
     assert any(d.startswith("scs") for d in project["optional-dependencies"]["solvers"])
     assert {"solvers", "vtk", "docs", "test"} <= set(re.findall(r"\w+", project["optional-dependencies"]["all"][0]))
+
+
+def test_the_quick_start_installs_neither_vtk_nor_the_linters():
+    """pip install -e ".[all]" made a 1.3 GB environment, 566 MB of it VTK for the tests; the
+    quick start (.[all], then the tests) must stay under 700 MB (measured: docs/architecture.md)."""
+    import tomllib
+
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    included = set(re.findall(r"\w+", extras["all"][0])) - {"qpcontact"}
+    packages = {re.split(r"[<>=\[ ]", d)[0].lower() for extra in included for d in extras[extra]}
+    assert not packages & {"vtk", "ruff", "mypy"}, packages
+    assert "lint" not in included and {"ruff", "mypy"} <= {re.split(r"[<>=]", d)[0] for d in extras["lint"]}
+    assert '.[all,lint]' in (ROOT / ".ci" / "run").read_text()
 
 
 @pytest.mark.slow

@@ -135,23 +135,67 @@ class ContactSystem:
         return x * np.sqrt(self.column_inverse_mass) * (self.operator_scale / self.velocity_scale)
 
 
-def contact_jacobian(contacts: Contacts, cells: Cells, side: str) -> np.ndarray:
+@dataclass(frozen=True, eq=False)
+class Turned:
+    """Contacts evaluated at the end of a step that turned the cells: the unknowns stay in the
+    slots of the cells at the start of the step (their axes, their W), and the rows of ``M`` are
+    the exact derivatives of the end-of-step normal gaps (the position-level step,
+    :mod:`qpcontact.colony.position`).
+
+    Attributes:
+        axes: (N, 3) the axes at the end of the step (a contact point rides along these as the
+            cell grows).
+        jacobian: (N, 3, 3) the left Jacobian of each cell's turn over the step
+            (:func:`qpcontact.geometry.motion.left_jacobian`): a change ``δθ`` of the turn in the
+            start frame turns the end state by ``J·δθ``.
+    """
+
+    axes: np.ndarray
+    jacobian: np.ndarray
+
+
+def contact_jacobian(contacts: Contacts, cells: Cells, side: str, turned: Turned | None = None) -> np.ndarray:
     """(K, 7) one side of J in the slot basis of its cell (without the ± sign):
-    ``[nᵀ, (r × n)·â, (r × n)·e₁, (r × n)·e₂, (s/l)(â·n)]``."""
+    ``[nᵀ, (r × n)·â, (r × n)·e₁, (r × n)·e₂, (s/l)(â·n)]``; for contacts at the end of a turned
+    step (:class:`Turned`), the moment is ``Jᵀ(r × n)`` and the growth term uses the end axis."""
     cell = contacts.cell_a if side == "a" else contacts.cell_b
     offset = contacts.offset_a if side == "a" else contacts.offset_b
     stretch = contacts.stretch_a if side == "a" else contacts.stretch_b
     n = contacts.normal
     moment = np.cross(offset, n)
     axes = cells.axes[cell]
+    riding = axes
+    if turned is not None:
+        moment = np.einsum("kji,kj->ki", turned.jacobian[cell], moment)
+        riding = turned.axes[cell]
     e1, e2 = perpendicular_basis(axes)
     dot = lambda u, v: np.einsum("ij,ij->i", u, v)  # noqa: E731
-    return np.column_stack([n, dot(moment, axes), dot(moment, e1), dot(moment, e2), stretch * dot(axes, n)])
+    return np.column_stack([n, dot(moment, axes), dot(moment, e1), dot(moment, e2), stretch * dot(riding, n)])
+
+
+def velocity_changes(cells: Cells, contacts: Contacts, impulses: np.ndarray, turned: Turned | None = None) -> np.ndarray:
+    """(K,) ``(M x)_k`` [length/time]: the change of each contact's relative normal velocity that
+    the (N, 7) impulses ``x`` make, with the rows of :func:`build_system` (the same ``turned``),
+    for every slot of every cell but the spin about the own axis (which moves no contact point,
+    and which the position-level motion drops)."""
+    slots = np.array([0, 1, 2, 4, 5, 6])
+    out = np.zeros(len(contacts))
+    for cell, sign, side in ((contacts.cell_a, 1.0, "a"), (contacts.cell_b, -1.0, "b")):
+        on = np.flatnonzero(cell >= 0)
+        if on.size == 0:
+            continue
+        part = contacts if on.size == len(contacts) else contacts.subset(on)
+        c = cell[on]
+        jac = contact_jacobian(part, cells, side, turned)
+        directions = slot_directions(cells, np.repeat(c, slots.size), np.tile(slots, c.size)).reshape(c.size, -1, 7)
+        in_slots = np.einsum("ksj,kj->ks", directions, impulses[c]) * slot_inverse_mass(cells, c)[:, slots]
+        out[on] += sign * np.einsum("ks,ks->k", jac[:, slots], in_slots)
+    return out
 
 
 def build_system(
     cells: Cells, contacts: Contacts, b: np.ndarray, *, reduce: bool = True, planar: bool | None = None,
-    scale: bool = True,
+    scale: bool = True, turned: Turned | None = None,
 ) -> ContactSystem:
     """Assemble the scaled system for the colliding ``contacts`` with right-hand side ``b``.
 
@@ -165,6 +209,8 @@ def build_system(
             scene that is not planar raises.
         scale: divide by ``σ_b`` and ``σ_B`` (default). ``False`` sets both to 1 (the matrix is
             then ``J W^{1/2}`` in the caller's units), only to measure the effect of scaling.
+        turned: the contacts are those at the end of a step that turned the cells
+            (:class:`Turned`; the position-level step); None: at the cells as they are.
     """
     k = len(contacts)
     if b.shape != (k,):
@@ -206,7 +252,7 @@ def build_system(
     rows, cols, vals = [], [], []
     for cell, sign, side in sides:
         valid = cell >= 0
-        jac = contact_jacobian(contacts if valid.all() else contacts.subset(valid), cells, side) * sign
+        jac = contact_jacobian(contacts if valid.all() else contacts.subset(valid), cells, side, turned) * sign
         c = cell[valid]
         col = column_of[c]
         entry = jac * sqrt_w[c]

@@ -36,8 +36,9 @@ import numpy as np
 from ..checks import flag, instance, integer, integer_array, number, real_array
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Plane, capsule_volume
-from .position import ContactImpulses, PositionSettings, PositionStepResult, position_step
-from .step import StepResult, rotate, step
+from ..geometry.motion import rotate
+from .position import CellMotion, ContactImpulses, PositionSettings, PositionStepResult, position_step
+from .step import StepResult, step
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,15 +291,17 @@ def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.n
 
 def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None, planes: Sequence[Plane] = (),
                   planar: bool | None = None, settings: PositionSettings | None = None,
-                  warm: ContactImpulses | None = None, on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
+                  warm: ContactImpulses | None = None, motion: CellMotion | None = None,
+                  on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
     """One growth step with the position-level :func:`qpcontact.colony.position_step`
     (overdamped; no division: call :func:`divide` before it, so that the step clears the
     overlap the daughters' axis noise makes and the state it returns keeps its tolerance).
 
     The growth drive of :func:`growth_step` is the growth column of ``drive`` (user-given
     momenta in the other columns); after the step, masses and growth inertias grow with the
-    volume as in :func:`grow`. ``warm`` is the previous step's ``result.warm`` (contact impulses
-    keyed by the colony's cell ids). A step that does not converge is not applied: it raises
+    volume as in :func:`grow`. ``warm`` and ``motion`` are the previous step's ``result.warm``
+    and ``result.motion`` (contact impulses and cell motion keyed by the colony's cell ids;
+    daughters born since move with their mother in the prediction). A step that does not converge is not applied: it raises
     :class:`~qpcontact.errors.StepFailedError` (``on_failure="raise"``) or returns the colony
     unchanged with the unconverged result (``on_failure="return"``).
     """
@@ -309,7 +312,7 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
         raise InvalidArgumentError(f"drive: expected shape ({cells.n}, 7) (p, L, g per cell), got {full.shape}")
     full[:, 6] = growth_drive(cells, increase, dt)
     out = position_step(cells, dt, drive=full, planes=planes, planar=planar, settings=settings, ids=colony.ids,
-                        warm=warm, on_failure=on_failure)
+                        warm=warm, motion=motion, parents=colony.parent_ids, on_failure=on_failure)
     if not out.converged:
         return colony, out
     grown = _grown(colony, cells, out.cells, paid, dt)

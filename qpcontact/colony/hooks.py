@@ -11,18 +11,35 @@ and the step index. It returns
 - a :class:`StepControl`, which may also give extra momenta per cell (forces) and the division
   rule of this step.
 
-On the command line: ``qpcontact simulate --model my_model.py``, where ``my_model.py`` defines
+On the command line: ``qpcontact simulate --hook my_model.py``, where ``my_model.py`` defines
 ``hook`` (:func:`load_hook`); ``examples/model_hook.py`` is a complete example.
 
-A hook that depends only on what it is given (the colony, its ids and time, the step) continues
-exactly when a run is resumed from a snapshot. A hook that needs random numbers can draw them
-from a generator seeded by the cell id (``np.random.default_rng([seed, id])``) so that they do
-not depend on the order of the calls; state a hook keeps for itself is not saved.
+A hook with a parameter named ``mechanics``, ``hook(colony, step, mechanics)``, is also given
+the cells' mechanics over the step that led to the colony (a
+:class:`~qpcontact.colony.CellMechanics`: ``pressure`` (N,), ``stress`` (N, 3, 3), one per cell
+of ``colony``: cells divide at the start of a step, so each has its own; zero before the first
+step): growth that slows under pressure is
+``colony.replace(rates=pressure_growth_rate(base, mechanics.pressure, ...))``
+(:func:`qpcontact.colony.pressure_growth_rate`; ``examples/pressure_growth.py``). The colony's
+``rates`` are what the next step grows with and what it keeps: compute them from a base rate
+each step, not from the rates the hook set the step before, or the slowing compounds. A cell that
+divides at the start of the step does not pass the rate the hook gave it on: its daughters grow
+that step at the rate division draws for newborns (the run's ``rate``, with ``rate_noise``), and
+the hook sets theirs from the next step on. (The same laws without a hook: the model settings
+``pressure_growth`` and ``stall_pressure``, ``qpcontact simulate --pressure-growth linear``,
+under which a newborn's first step is slowed by her mother's pressure.)
+
+A hook that depends only on what it is given (the colony, its ids and time, the step, the
+mechanics, which the snapshots keep) continues exactly when a run is resumed from a snapshot. A
+hook that needs random numbers can draw them from a generator seeded by the cell id
+(``np.random.default_rng([seed, id])``) so that they do not depend on the order of the calls;
+state a hook keeps for itself is not saved.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +49,7 @@ import numpy as np
 
 from ..errors import InvalidArgumentError, ModelHookError
 from .growth import Colony
+from .mechanics import CellMechanics
 
 
 @dataclass
@@ -58,8 +76,17 @@ class StepControl:
     division_length: float | np.ndarray | None = None
 
 
-#: A model hook: ``hook(colony, step) -> None | Colony | StepControl``.
-Hook = Callable[[Colony, int], Colony | StepControl | None]
+#: A model hook: ``hook(colony, step) -> None | Colony | StepControl`` (or
+#: ``hook(colony, step, mechanics)``: module docstring).
+Hook = Callable[..., Colony | StepControl | None]
+
+
+def wants_mechanics(hook: Hook) -> bool:
+    """Whether ``hook`` takes a parameter named ``mechanics`` (module docstring)."""
+    try:
+        return "mechanics" in inspect.signature(hook).parameters
+    except (TypeError, ValueError):  # a callable without a signature (some builtins)
+        return False
 
 
 def push(colony: Colony, velocities: Any) -> np.ndarray:
@@ -71,8 +98,9 @@ def push(colony: Colony, velocities: Any) -> np.ndarray:
     return drive
 
 
-def apply_hook(hook: Hook | None, colony: Colony, step: int) -> StepControl:
-    """Call ``hook`` and check what it returns. The result always has ``colony`` set.
+def apply_hook(hook: Hook | None, colony: Colony, step: int, mechanics: CellMechanics | None = None) -> StepControl:
+    """Call ``hook`` (with ``mechanics`` if it takes them, :func:`wants_mechanics`) and check
+    what it returns. The result always has ``colony`` set.
 
     Raises:
         ModelHookError: the hook raised (its exception is the cause), or returned something
@@ -80,7 +108,13 @@ def apply_hook(hook: Hook | None, colony: Colony, step: int) -> StepControl:
             wrong shape or value.
     """
     try:
-        answer = None if hook is None else hook(colony, step)
+        if hook is None:
+            answer = None
+        elif wants_mechanics(hook):
+            answer = hook(colony, step, mechanics=CellMechanics.zero(colony.cells.n, False) if mechanics is None
+                          else mechanics)
+        else:
+            answer = hook(colony, step)
     except Exception as exc:  # the model's own code: reported with its traceback as the cause
         raise ModelHookError(f"model hook at step {step} raised {type(exc).__name__}: {exc}") from exc
     if answer is None:

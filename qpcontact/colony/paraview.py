@@ -9,12 +9,16 @@ the optional extra ``qpcontact[vtk]``) holds, for N cells:
 - data on every point and every cell (an end point carries its cell's values): ``axis`` (3,
   unit vector), ``length`` (cylinder length), ``radius``, ``id``, ``parent_id`` (-1 for a
   founder), ``growth_rate`` [1/time], ``velocity`` (3) — in the colony's units (µm and doubling
-  times in ``qpcontact simulate``).
+  times in ``qpcontact simulate``); with the cells' mechanics (a run's snapshots) also
+  ``pressure`` (compressive positive) and ``stress`` (9 components, the 3 × 3 virial stress row
+  by row, tension positive; ParaView reads 9 components as a tensor): per footprint area in a
+  monolayer [force/µm], per volume in 3D [force/µm²] (:mod:`qpcontact.colony.mechanics`).
 
 The ``.pvd`` collection lists the files with their simulated time, so that ParaView plays the
 run as a time series. To see capsules: open ``colony.pvd``, apply *Tube* to the lines with *Vary
 Radius: By Absolute Scalar* on ``radius`` (and *Capping* on), or *Glyph* the centres with a
-cylinder oriented by ``axis`` and scaled by ``length``; colour by any of the arrays.
+cylinder oriented by ``axis`` and scaled by ``length``; colour by any of the arrays (e.g.
+``pressure``).
 """
 
 from __future__ import annotations
@@ -30,9 +34,12 @@ import numpy as np
 from ..errors import InvalidArgumentError
 from ..outputs import atomic_write, replacing
 from .growth import Colony
+from .mechanics import CellMechanics
 
 #: The arrays on every point and cell, in order.
 ARRAYS = ("axis", "length", "radius", "id", "parent_id", "growth_rate", "velocity")
+#: The arrays added when the cells' mechanics are given.
+MECHANICS_ARRAYS = ("pressure", "stress")
 
 
 def _meshio() -> Any:
@@ -52,31 +59,34 @@ def available() -> bool:
     return True
 
 
-def cell_data(colony: Colony) -> dict[str, np.ndarray]:
-    """The per-cell arrays of :data:`ARRAYS`."""
+def cell_data(colony: Colony, mechanics: CellMechanics | None = None) -> dict[str, np.ndarray]:
+    """The per-cell arrays of :data:`ARRAYS` (and :data:`MECHANICS_ARRAYS` with ``mechanics``)."""
     cells = colony.cells
-    return {"axis": cells.axes, "length": cells.lengths, "radius": cells.radii, "id": colony.ids,
+    data = {"axis": cells.axes, "length": cells.lengths, "radius": cells.radii, "id": colony.ids,
             "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities}
+    if mechanics is not None:
+        data.update(pressure=mechanics.pressure, stress=mechanics.stress.reshape(cells.n, 9))
+    return data
 
 
-def colony_mesh(colony: Colony) -> Any:
+def colony_mesh(colony: Colony, mechanics: CellMechanics | None = None) -> Any:
     """The colony as a ``meshio.Mesh`` (module docstring)."""
     meshio = _meshio()
     cells = colony.cells
     n = cells.n
     half = 0.5 * cells.lengths[:, None] * cells.axes
     ends = np.stack([cells.centers - half, cells.centers + half], axis=1).reshape(2 * n, 3)
-    per_cell = cell_data(colony)
+    per_cell = cell_data(colony, mechanics)
     point_data = {name: np.concatenate([values, np.repeat(values, 2, axis=0)]) for name, values in per_cell.items()}
     blocks = [("vertex", np.arange(n)[:, None]), ("line", n + np.arange(2 * n).reshape(n, 2))]
     return meshio.Mesh(np.concatenate([cells.centers, ends]), blocks, point_data=point_data,
                        cell_data={name: [values, values] for name, values in per_cell.items()})
 
 
-def write_vtu(path: str | Path, colony: Colony, step: int = -1) -> Path:
-    """Write the colony as a ``.vtu`` file (atomically). ``step`` is for the caller's records.
-    Returns the path."""
-    mesh = colony_mesh(colony)
+def write_vtu(path: str | Path, colony: Colony, step: int = -1, *, mechanics: CellMechanics | None = None) -> Path:
+    """Write the colony as a ``.vtu`` file (atomically), with the cells' pressure and stress
+    when ``mechanics`` is given. ``step`` is for the caller's records. Returns the path."""
+    mesh = colony_mesh(colony, mechanics)
     with replacing(path) as temporary:
         _meshio().write(temporary, mesh, file_format="vtu")
     return Path(path)

@@ -3,13 +3,18 @@ without pyplot, so importing this module leaves the process's matplotlib backend
 
 - :func:`draw_colony`: the cells seen from above (+z, the x–y plane) or from the side (−y, the
   x–z plane), each capsule outlined exactly and coloured by the orientation of its axis in the
-  xy-plane (a cyclic colour map: a rod and its reverse have the same colour); static planes
-  (walls, the substrate) seen edge-on in that view are drawn as thick grey lines.
+  xy-plane (a cyclic colour map: a rod and its reverse have the same colour), or by a value per
+  cell such as its pressure (``values``, with a colour bar in its units); static planes (walls,
+  the substrate) seen edge-on in that view are drawn as thick grey lines.
 - :func:`save_colony_picture`: the top view, and with ``side_view`` (3D colonies) a side view
   under it.
+- :func:`plot_pressure_profile`: the pressure of each cell of a 2D colony against its distance
+  from the colony's centre, the mean in rings, and the parabola ``a (R² − r²)`` fitted to it.
 - :func:`plot_history`: cell count, largest and mean overlap (fraction of the diameter),
-  solver time per step and the solver's residuals against simulated time. Values that a log
-  axis cannot show (zero: no overlap, no contact) are left out, not drawn at a floor.
+  solver time per step, and the velocity step's solver residuals (scaled) or the position
+  step's linearizations per step, against simulated time: each panel a different quantity in
+  its own unit. Values that a log axis cannot show (zero: no overlap, no contact) are left out,
+  not drawn at a floor.
 - :func:`animate`: a GIF of saved snapshots (matplotlib's ``PillowWriter``).
 
 Lengths are labelled in µm and time in doubling times, the units of ``qpcontact simulate``
@@ -28,12 +33,25 @@ from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
 from matplotlib.figure import Figure
 
+from ..errors import InvalidArgumentError
 from ..geometry import Cells
+from .mechanics import fit_parabola, radial_distances, radial_profile
 
 #: Points per semicircular cap of a drawn capsule.
 CAP_POINTS = 8
 #: The coordinates each view shows (x, y indices) and the one it looks along.
 VIEWS = {"top": (0, 1, 2), "side": (0, 2, 1)}
+#: The force unit of ``qpcontact simulate`` (masses = volumes in µm³, overdamped: a force f moves a
+#: free cell of volume V at f/V): what the pressure's units are made of.
+FORCE_UNIT = "F: moves 1 µm³ of cell at 1 µm per doubling time"
+ORIENTATION_LABEL = "axis orientation in the xy-plane [deg]"
+
+
+def pressure_label(planar: bool, length_unit: str = "µm") -> str:
+    """The axis or colour-bar label of a cell pressure (:mod:`qpcontact.colony.mechanics`):
+    2D [F/µm] or 3D [F/µm²], with what F is (:data:`FORCE_UNIT`)."""
+    unit = f"F/{length_unit}" if planar else f"F/{length_unit}²"
+    return f"{'2D ' if planar else ''}pressure [{unit}]\n({FORCE_UNIT})"
 
 
 def capsule_outlines(cells: Cells, view: str = "top") -> np.ndarray:
@@ -71,17 +89,34 @@ def draw_planes(ax: Axes, planes: Sequence[Any], view: str = "top") -> int:
 
 
 def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: bool = True, view: str = "top",
-                planes: Sequence[Any] = (), length_unit: str = "µm") -> PolyCollection:
+                planes: Sequence[Any] = (), length_unit: str = "µm", values: Any = None,
+                value_label: str = "") -> PolyCollection:
     """Draw the cells on ``ax`` from above (``view="top"``) or from the side (``"side"``),
-    coloured by axis orientation in the xy-plane (0–180°), with the planes seen edge-on."""
+    coloured by axis orientation in the xy-plane (0–180°), or by ``values`` (one number per
+    cell, e.g. :func:`qpcontact.cell_pressure`; colour bar labelled ``value_label``, with its
+    units: :func:`pressure_label`), with the planes seen edge-on."""
     i, j, k = VIEWS[view]
-    orientation = np.degrees(np.arctan2(cells.axes[:, 1], cells.axes[:, 0])) % 180.0
     # Cells farther from the viewer are drawn first: the top layer of a 3D biofilm from above,
     # the front row (small y) from the side.
     order = np.argsort(cells.centers[:, k] if view == "top" else -cells.centers[:, k], kind="stable")
-    polys = PolyCollection(list(capsule_outlines(cells, view)[order]), array=orientation[order], cmap="twilight",
-                           edgecolors="k", linewidths=0.2)
-    polys.set_clim(0.0, 180.0)
+    edges = 0.2
+    if values is None:
+        colour, cmap, limits = np.degrees(np.arctan2(cells.axes[:, 1], cells.axes[:, 0])) % 180.0, "twilight", (0.0, 180.0)
+        label = ORIENTATION_LABEL
+    else:
+        colour, cmap, label = np.asarray(values, dtype=float), "viridis", value_label
+        if colour.shape != (cells.n,):
+            raise InvalidArgumentError(f"values: expected one number per cell ({cells.n}), got shape {colour.shape}")
+        finite = colour[np.isfinite(colour)]
+        # The top of the scale at the 99th percentile of many cells: a few cells on a force chain
+        # would otherwise leave the others in the dark end of the map (the colour bar says so).
+        top = float(np.percentile(finite, 99)) if finite.size >= 100 else float(finite.max(initial=0.0))
+        limits = (float(finite.min(initial=0.0)), top)
+        limits = limits if limits[1] > limits[0] else (limits[0], limits[0] + 1.0)
+        edges = 0.2 if cells.n <= 1000 else 0.0  # outlines of thousands of cells hide their colours
+    polys = PolyCollection(list(capsule_outlines(cells, view)[order]), array=colour[order], cmap=cmap,
+                           edgecolors="k", linewidths=edges)
+    polys.set_clim(*limits)
     ax.add_collection(polys)
     ax.set_aspect("equal")
     ax.autoscale_view()
@@ -92,24 +127,32 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     if title:
         ax.set_title(title)
     if colorbar and ax.figure is not None:
-        ax.figure.colorbar(polys, ax=ax, label="axis orientation in the xy-plane [deg]", shrink=0.8)
+        ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8, extend=_beyond(polys))
     return polys
 
 
+def _beyond(polys: PolyCollection) -> str:
+    """The colour bar's ``extend``: "max" when some cells lie above the top of the scale."""
+    values = np.asarray(polys.get_array(), dtype=float)
+    return "max" if values.size and np.nanmax(values) > polys.get_clim()[1] else "neither"
+
+
 def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None, *, side_view: bool = False,
-                        planes: Sequence[Any] = ()) -> Path:
+                        planes: Sequence[Any] = (), values: Any = None, value_label: str = "") -> Path:
     """Draw the colony from above (and, with ``side_view``, from the side under it) and save it
-    as an image (PNG, SVG, ... by the file suffix). The figure's height follows the colony's
-    shape (a colony in a channel is a strip)."""
+    as an image (PNG, SVG, ... by the file suffix), coloured by orientation or by ``values``
+    (:func:`draw_colony`). The figure's height follows the colony's shape (a colony in a channel
+    is a strip)."""
     fig = Figure(figsize=(7, 6), dpi=120, layout="constrained")
+    colours = dict(values=values, value_label=value_label)
     if not side_view:
         top = fig.subplots()
-        draw_colony(top, cells, planes=planes)
+        draw_colony(top, cells, planes=planes, **colours)
         height = 0.0
     else:
         top, side = fig.subplots(2, 1)
-        polys = draw_colony(top, cells, planes=planes, colorbar=False)
-        draw_colony(side, cells, title="side view (from −y)", planes=planes, view="side", colorbar=False)
+        polys = draw_colony(top, cells, planes=planes, colorbar=False, **colours)
+        draw_colony(side, cells, title="side view (from −y)", planes=planes, view="side", colorbar=False, **colours)
         # The same x range as the top view, and at least a quarter of it in height (a flat
         # biofilm is a thin strip otherwise), from just below the lowest cell or plane.
         x_range = top.get_xlim()
@@ -119,13 +162,52 @@ def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None
         side.set_xlim(*x_range)
         side.set_ylim(bottom, bottom + height)
         top.get_gridspec().set_height_ratios([top.get_ylim()[1] - top.get_ylim()[0], height])
-        fig.colorbar(polys, ax=[top, side], label="axis orientation in the xy-plane [deg]", shrink=0.8)
+        fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label, shrink=0.8,
+                     extend=_beyond(polys))
     x_range, y_range = top.get_xlim(), top.get_ylim()
     ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
     fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))
     if title:
         fig.suptitle(title, fontsize=10)
     fig.savefig(path)
+    return Path(path)
+
+
+def pressure_profile_figure(cells: Cells, pressure: Any, *, title: str | None = None, bins: int = 20,
+                            label: str | None = None, length_unit: str = "µm") -> Figure:
+    """The figure of :func:`plot_pressure_profile`."""
+    pressure = np.asarray(pressure, dtype=float)
+    r, _ = radial_distances(cells)
+    profile = radial_profile(cells, pressure, bins=bins)
+    fig = Figure(figsize=(7, 4.8), dpi=120, layout="constrained")
+    ax = fig.subplots()
+    ax.plot(r, pressure, ".", ms=1.5, color="0.65", alpha=0.6, label="cells")
+    kept = profile.counts > 0
+    ax.errorbar(profile.radius[kept], profile.mean[kept], yerr=profile.std[kept], fmt="o-", ms=4, lw=1, capsize=2,
+                color="C0", label="mean in rings (± std)")
+    if cells.n >= 2:
+        fit = fit_parabola(r, pressure)
+        grid = np.linspace(0.0, float(r.max(initial=0.0)), 200)
+        ax.plot(grid, fit.amplitude * (np.nan_to_num(fit.radius) ** 2 - grid**2), "--", color="C3",
+                label=f"fit a(R² − r²): a = {fit.amplitude:.3g}, R = {fit.radius:.3g} {length_unit}")
+    ax.set_xlabel(f"distance from the colony's centre r [{length_unit}]")
+    ax.set_ylabel(label or pressure_label(True, length_unit))
+    ax.axhline(0.0, color="0.3", lw=0.5)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return fig
+
+
+def plot_pressure_profile(path: str | Path, cells: Cells, pressure: Any, title: str | None = None, *, bins: int = 20,
+                          label: str | None = None) -> Path:
+    """The radial pressure profile of a 2D colony: each cell's pressure (:func:`qpcontact.cell_pressure`)
+    against the distance of its centre from the colony's centre (the mean of the centres), the mean
+    and standard deviation in ``bins`` rings, and the least-squares parabola ``a (R² − r²)``
+    (:func:`~qpcontact.colony.mechanics.fit_parabola`; what a continuum model of a growing colony
+    with friction predicts, docs/mechanics.md). ``label``: the pressure axis (default: the 2D
+    pressure of ``qpcontact simulate``, :func:`pressure_label`)."""
+    pressure_profile_figure(cells, pressure, title=title, bins=bins, label=label).savefig(path)
     return Path(path)
 
 
@@ -148,11 +230,19 @@ def history_figure(history: Mapping[str, Sequence[float]], title: str | None = N
     axes[0, 1].legend()
     axes[1, 0].semilogy(t, positive(history["solve_seconds"]))
     axes[1, 0].set_ylabel("contact solve per step [s]")
-    for key in ("penetration", "complementarity"):
-        if key in history and len(history[key]):
-            axes[1, 1].semilogy(t, positive(history[key]), label=key, lw=0.8)
-    axes[1, 1].set_ylabel("solver residual [dimensionless, scaled]")
-    axes[1, 1].legend()
+    residuals = [key for key in ("penetration", "complementarity")
+                 if key in history and np.any(np.isfinite(np.asarray(history[key], dtype=float)))]
+    if residuals:  # the velocity step: what its contact solve left, in the solver's scaled units
+        for key in residuals:
+            axes[1, 1].semilogy(t, positive(history[key]), label=f"{key} residual", lw=0.8)
+        axes[1, 1].set_ylabel("contact solve residual [dimensionless, scaled]")
+        axes[1, 1].legend()
+    elif "linearizations" in history:  # the position step: its overlap is measured above; its work here
+        axes[1, 1].plot(t, np.asarray(history["linearizations"], dtype=float), lw=0.8, label="linearizations")
+        if "rejected" in history:
+            axes[1, 1].plot(t, np.asarray(history["rejected"], dtype=float), lw=0.8, label="halved attempts")
+        axes[1, 1].set_ylabel("per step [count]")
+        axes[1, 1].legend()
     for ax in axes[1]:
         ax.set_xlabel(f"time [{time_unit}]")
     fig.supxlabel("steps without overlap, contacts or residual have no point on the log axes", fontsize=7, color="0.4")
@@ -163,10 +253,13 @@ def history_figure(history: Mapping[str, Sequence[float]], title: str | None = N
 
 def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title: str | None = None) -> Path:
     """Four panels against simulated time: cell count; largest and mean overlap as a fraction
-    of the diameter; solver time per step [s]; the solver's penetration and complementarity
-    residuals. ``history`` holds equal-length sequences ``time``, ``cells``, ``max_overlap``,
-    ``mean_overlap``, ``solve_seconds``, ``penetration`` and (optionally) ``complementarity``.
-    Zeros (no overlap, no contact) are not drawn (:func:`positive`)."""
+    of the diameter; solver time per step [s]; the velocity step's penetration and
+    complementarity residuals (scaled), or, where the history has none (the position step, which
+    measures the true overlap instead), its linearizations and halved attempts per step.
+    ``history`` holds equal-length sequences ``time``, ``cells``, ``max_overlap``,
+    ``mean_overlap``, ``solve_seconds`` and, optionally, ``penetration``, ``complementarity``,
+    ``linearizations``, ``rejected``. Zeros (no overlap, no contact) are not drawn
+    (:func:`positive`)."""
     history_figure(history, title).savefig(path)
     return Path(path)
 

@@ -49,79 +49,75 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
-from ..assembly.system import build_system
-from ..checks import number
+from ..assembly.system import ContactSystem, Turned, build_system, velocity_changes
+from ..described import check_fields, documented, setting
 from ..errors import InvalidArgumentError, StepFailedError
 from ..geometry.cells import Cells
 from ..geometry.contacts import (
+    KIND_BITS,
     Contacts,
     candidate_pairs,
     concatenate,
+    contact_keys,
     evaluate_contacts,
-    relative_normal_velocity,
     select_contacts,
 )
+from ..geometry.motion import left_jacobian, move, rotate, turning_vectors
 from ..geometry.surfaces import Plane, evaluate_plane_contacts, plane_contacts
-from ..solvers import Problem, get_solver, solve
-from .step import rotate
+from ..solvers import Problem, SolverSpec, get_solver, solve
+
+__all__ = ["CellMotion", "ContactImpulses", "PositionSettings", "PositionStepResult", "move", "position_step"]
 
 
+@documented
 @dataclass(frozen=True)
 class PositionSettings:
-    """The parameters of :func:`position_step` (dimensionless unless said).
+    """The parameters of :func:`position_step`; the ``[position]`` table of a run's settings
+    (:class:`qpcontact.colony.Settings`), flags ``--position-*``. Each field is described once,
+    with its unit, in its :func:`~qpcontact.described.setting` (listed below)."""
 
-    Attributes:
-        overlap_tolerance: largest overlap a step may leave beyond its target, as a fraction of
-            the pair's diameter ``ρ_a + ρ_b``.
-        margin: reach of the contact search around the moved cells [diameters]; pairs farther
-            apart are not constraints in that iteration.
-        max_iterations: cap on linearizations per step.
-        turn_limit: largest displacement of a cell's tips by turning in one step [diameters of
-            that cell]; None: no bound (then any complementarity solver can be used).
-        trust: fraction of ``turn_limit`` the tips may move per iteration.
-        relaxation: overlap present at the start of the step is removed by at most this much per
-            step [fraction of the pair's diameter].
-        aim: the linearizations aim at this gap beyond each target [fraction of the pair's
-            diameter], so that the error of one linearization (turning is not linear) falls
-            within the tolerance: on a grown colony of 10⁴ cells, one linearization per step
-            instead of six (docs/performance.md). Contacts then rest at up to this gap, as if the
-            cells were this much thicker (0.5 % of a diameter by default).
-        allow_shrinking: False: contacts can stop a cell's growth but not shorten it.
-        solver: the QP solver of each linearization (it must take bounds unless ``turn_limit`` is
-            None and ``allow_shrinking`` is True).
-        tolerance: its tolerance (scaled units of :mod:`qpcontact.assembly.system`: impulses
-            relative to the largest, velocities relative to the fastest approach). 10⁻³ moves a
-            contact by at most 10⁻³ of the step's largest approach, far below the overlap
-            tolerance, in 14 interior-point iterations instead of 22 at 10⁻⁵ (docs/performance.md).
-    """
-
-    overlap_tolerance: float = 0.01
-    margin: float = 0.5
-    max_iterations: int = 30
-    turn_limit: float | None = 0.2
-    trust: float = 0.3
-    relaxation: float = 0.05
-    aim: float = 0.01
-    allow_shrinking: bool = False
-    solver: str = "ipm"
-    tolerance: float = 1e-3
+    overlap_tolerance: float = setting(
+        0.01, unit="fraction of the pair's diameter ρ_a + ρ_b", above=0,
+        help="largest overlap a step may leave beyond its target")
+    margin: float = setting(
+        0.5, unit="diameters", above=0,
+        help="reach of the contact search around the moved cells; pairs farther apart are not constraints in that "
+             "iteration")
+    max_iterations: int = setting(30, unit="linearizations", at_least=1, help="cap on linearizations per step")
+    turn_limit: float | None = setting(
+        0.2, unit="diameters of that cell", above=0,
+        help="largest displacement of a cell's tips by turning in one step; none: no bound (then any complementarity "
+             "solver can be used)")
+    trust: float = setting(0.3, unit="dimensionless", above=0, at_most=1,
+                           help="fraction of turn_limit the tips may move per iteration")
+    relaxation: float = setting(
+        0.05, unit="fraction of the pair's diameter", above=0,
+        help="overlap present at the start of the step is removed by at most this much per step")
+    aim: float = setting(
+        0.02, unit="fraction of the pair's diameter", at_least=0,
+        help="the linearizations aim at this gap beyond each target, so that the error of one linearization "
+             "(turning, and contacts sliding over the caps, are not linear) falls within the tolerance: on grown "
+             "colonies of 5,000 cells (2D) and 2,000 (3D), one linearization per step where 0.01 needed two or "
+             "three (docs/model-notes.md); contacts then rest at up to this gap, as if the cells were this much "
+             "thicker")
+    allow_shrinking: bool = setting(
+        False, unit="", help="contacts may shorten a cell (off: they can stop its growth but not reverse it)")
+    solver: str = setting(
+        "ipm", unit="",
+        help="the QP solver of each linearization; it must take bounds (ipm, mprgp, or a qpsolvers backend in the "
+             "primal form) unless turn_limit is none and allow_shrinking is on")
+    tolerance: float = setting(
+        1e-3, unit="dimensionless, scaled", above=0, below=1,
+        help="its tolerance, in the scaled units of qpcontact.assembly.system (impulses relative to the largest, "
+             "velocities relative to the fastest approach): 10⁻³ moves a contact by at most 10⁻³ of the step's "
+             "largest approach, far below the overlap tolerance, in 14 interior-point iterations instead of 22 at "
+             "10⁻⁵ (docs/performance.md)")
 
     def __post_init__(self) -> None:
-        for name in ("overlap_tolerance", "margin", "trust", "relaxation", "tolerance", "turn_limit", "aim"):
-            number(name, getattr(self, name), minimum=0.0, open_minimum=name != "aim", allow_none=name == "turn_limit")
-        if self.trust > 1:
-            raise InvalidArgumentError(f"trust: must be in (0, 1], got {self.trust!r}")
-        if not (isinstance(self.max_iterations, int) and not isinstance(self.max_iterations, bool)
-                and self.max_iterations >= 1):
-            raise InvalidArgumentError(f"max_iterations: must be an integer >= 1, got {self.max_iterations!r}")
-        if not isinstance(self.allow_shrinking, bool):
-            raise InvalidArgumentError(f"allow_shrinking: must be True or False, got {self.allow_shrinking!r}")
-        if not isinstance(self.solver, str):
-            raise InvalidArgumentError(f"solver: expected a solver name, got {self.solver!r}")
+        check_fields(self)
 
     @property
     def bounded(self) -> bool:
@@ -156,20 +152,66 @@ class ContactImpulses:
         """The impulse of each contact ``(a[i], b[i], kind[i])``; 0 where there is none."""
         if self.impulse.size == 0 or a.size == 0:
             return np.zeros(a.size)
-        low = min(int(self.b.min()), int(b.min()), 0)
-        base = max(int(self.a.max()), int(a.max()), int(self.b.max()), int(b.max())) - low + 1
-        if base >= 2**28:
-            raise InvalidArgumentError(f"ids: contact keys need ids below 2**28, got {base}")
-
-        def key(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
-            return (x.astype(np.int64) * base + (y.astype(np.int64) - low)) * 8 + z
-
-        reference = key(self.a, self.b, self.kind)
+        span = 1 + max(int(np.max(self.a)), int(np.max(a)), int(np.max(np.abs(self.b))), int(np.max(np.abs(b))))
+        reference = contact_keys(self.a, self.b, self.kind, span)
         order = np.argsort(reference)
         reference, values = reference[order], self.impulse[order]
-        query = key(a, b, kind)
+        query = contact_keys(a, b, kind, span)
         where = np.minimum(np.searchsorted(reference, query), reference.size - 1)
         return np.where(reference[where] == query, values[where], 0.0)
+
+
+@dataclass(frozen=True)
+class CellMotion:
+    """Each cell's velocity over a step, keyed by cell id: the predictor of where the next step
+    will take the cells, so that its first linearization already holds the contacts that the
+    motion will make (:func:`position_step`'s ``motion``).
+
+    A colony's flow changes little from one step to the next, while a cell can move a diameter
+    relative to a neighbour in a step (a cell pushed out of a jam): searching for contacts only
+    around the free motion (growth in place) missed such pairs, and a second linearization was
+    needed to catch them (on grown 2D colonies of 5,000–10⁴ cells, overlaps of 0.26–0.47 of a
+    diameter after the first; docs/model-notes.md).
+
+    Attributes:
+        ids: (M,) cell ids.
+        velocity: (M, 3) the velocity of each cell's centre over the step [length/time].
+        turning: (M, 3) its rotation vector per unit time [rad/time].
+    """
+
+    ids: np.ndarray
+    velocity: np.ndarray
+    turning: np.ndarray
+
+    @classmethod
+    def empty(cls) -> CellMotion:
+        return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+
+    @classmethod
+    def of(cls, start: Cells, end: Cells, ids: np.ndarray, dt: float, drive_and_impulses: np.ndarray) -> CellMotion:
+        """The motion of a step from ``start`` to ``end`` with these momenta."""
+        return cls(np.asarray(ids, dtype=np.int64).copy(), (end.centers - start.centers) / dt,
+                   turning_vectors(start, dt, drive_and_impulses) / dt)
+
+    def predict(self, cells: Cells, ids: np.ndarray, dt: float, parents: np.ndarray | None = None) -> Cells:
+        """``cells`` moved by ``dt`` with the motion of their ids (or of their parents' ids, for
+        cells born since: daughters move with their mother); cells of unknown ids stay."""
+        if self.ids.size == 0 or cells.n == 0:
+            return cells
+        order = np.argsort(self.ids)
+        known = self.ids[order]
+
+        def index_of(query: np.ndarray) -> np.ndarray:
+            where = np.minimum(np.searchsorted(known, query), known.size - 1)
+            return np.where(known[where] == query, order[where], -1)
+
+        row = index_of(np.asarray(ids, dtype=np.int64))
+        if parents is not None:
+            row = np.where(row >= 0, row, index_of(np.asarray(parents, dtype=np.int64)))
+        moving = row >= 0
+        velocity = np.where(moving[:, None], self.velocity[np.maximum(row, 0)], 0.0)
+        turning = np.where(moving[:, None], self.turning[np.maximum(row, 0)], 0.0)
+        return cells.replace(centers=cells.centers + velocity * dt, axes=rotate(cells.axes, turning * dt))
 
 
 @dataclass
@@ -198,6 +240,8 @@ class PositionStepResult:
             start of the next step.
         turn_limited: cells whose turning sat on a bound (the step's limit or the iteration's
             trust region) in the last solve.
+        motion: each cell's motion over the step, keyed by ``ids``: the predictor of the next
+            step (its ``motion``).
     """
 
     cells: Cells
@@ -215,61 +259,73 @@ class PositionStepResult:
     message: str = ""
     warm: ContactImpulses = field(default_factory=ContactImpulses.empty)
     turn_limited: int = 0
+    motion: CellMotion = field(default_factory=CellMotion.empty)
+
+    @property
+    def contact_forces(self) -> np.ndarray:
+        """(K,) normal force of each contact of :attr:`contacts` over the step, ``≥ 0`` (a push),
+        in the units in which the drive is a force.
+
+        The step is overdamped: a cell moves by ``dt·W·(drive + impulses)``, so its "mass" ``m``
+        is a drag coefficient (velocity = ``p/m``) and the drive ``p`` is a force [mass·length/
+        time in the library's labels; with ``qpcontact simulate``'s masses = volumes, a free cell
+        of volume V [µm³] driven by f moves at f/V µm per doubling time]. The contact
+        "impulses" enter the motion exactly as the drive does, so they are these forces: a cell
+        held still against a wall by a drive f carries f at that contact, and the force on cell
+        a of contact k is ``contact_forces[k]·normal[k]`` at ``offset_a[k]`` (minus that on b).
+
+        They are :attr:`contact_impulses`, the last solve's multipliers: they balance
+        ``impulses`` (the momenta the cells moved with) when that solve's answer was applied in
+        full, which is every step except those whose last linearization was damped or
+        backtracked. A step that needed no solve (the free motion was within the overlap
+        tolerance, e.g. a drive too weak to move a cell by 0.02 diameters against its
+        neighbour) reports no force; contacts first found after the last solve report 0.
+        Where contacts are redundant (statically indeterminate: two rods side by side keep the
+        closest points and both ends; loops of a jammed packing) the split of a load between
+        them is the solver's pick; the net force and torque on each cell are determined (they
+        are the step's ``impulses``).
+        """
+        return self.contact_impulses
 
 
-def move(cells: Cells, dt: float, momenta: np.ndarray) -> Cells:
-    """The cells at the end of a step with generalized momenta ``momenta`` (N, 7): centres by
-    ``dt·p/m``, axes turned exactly by ``dt·ω⊥`` (the angular velocity across the axis; a spin
-    about the cell's own axis turns nothing), lengths by ``dt·g/G``. Masses and inertia are those
-    of ``cells`` (the start of the step); the returned cells carry ``momenta``.
-
-    Raises:
-        InvalidArgumentError: a length would become negative.
-    """
-    moving = cells.replace(momenta=momenta[:, 0:3], angular_momenta=momenta[:, 3:6], growth_momenta=momenta[:, 6])
-    omega = moving.angular_velocities
-    omega -= np.einsum("ij,ij->i", omega, cells.axes)[:, None] * cells.axes
-    lengths = cells.lengths + moving.growth_rates * dt
-    if np.any(lengths < 0):
-        i = int(np.flatnonzero(lengths < 0)[0])
-        raise InvalidArgumentError(f"dt = {dt!r}: cell {i} would reach length {lengths[i]:.3g} < 0")
-    return moving.replace(centers=cells.centers + moving.velocities * dt, axes=rotate(cells.axes, omega * dt),
-                          lengths=lengths)
-
-
-@dataclass
-class _ContactSet:
-    """Contacts kept during a step, as keys: cells ``a``, ``b`` (``-1 - j`` for plane ``j``) and
-    contact kind (:class:`qpcontact.geometry.Contacts`)."""
+# ---------------------------------------------------------------------------------------------
+# The contacts of a step: found at the moved positions, kept for the rest of the step
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Tracked:
+    """Contacts kept during a step: cells ``a``, ``b`` (``-1 - j`` for plane ``j``) and contact
+    kind (:class:`qpcontact.geometry.Contacts`), with their keys (:func:`contact_keys`)."""
 
     a: np.ndarray
     b: np.ndarray
     kind: np.ndarray
+    keys: np.ndarray
 
-    def key(self, n_planes: int, n_cells: int) -> np.ndarray:
-        base = np.int64(n_cells + n_planes)
-        return ((self.a.astype(np.int64) * base) + (self.b + n_planes)) * 8 + self.kind
+    @classmethod
+    def of(cls, a: np.ndarray, b: np.ndarray, kind: np.ndarray, span: int) -> _Tracked:
+        """The contacts ``(a, b, kind)``, each once (in the order of their keys)."""
+        keys, first = np.unique(contact_keys(a, b, kind, span), return_index=True)
+        return cls(a[first], b[first], kind[first], keys)
 
-    def union(self, other: _ContactSet, n_planes: int, n_cells: int) -> _ContactSet:
-        a, b, kind = (np.concatenate([u, v]) for u, v in
-                      ((self.a, other.a), (self.b, other.b), (self.kind, other.kind)))
-        joined = _ContactSet(a, b, kind)
-        _, first = np.unique(joined.key(n_planes, n_cells), return_index=True)
-        return _ContactSet(a[first], b[first], kind[first])
+    def union(self, other: _Tracked, span: int) -> _Tracked:
+        return _Tracked.of(np.concatenate([self.a, other.a]), np.concatenate([self.b, other.b]),
+                           np.concatenate([self.kind, other.kind]), span)
 
 
-def _detect(cells: Cells, planes: Sequence[Plane], reach: float, planar: bool) -> _ContactSet:
-    """Every contact within ``reach`` [length] of the cells as they are."""
+def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int) -> _Tracked:
+    """Every contact within ``reach`` [length] of the cells as they are (the closest points of
+    every pair, whatever its ends: across the linearizations the closest point moves along the
+    pair, and only kind 0 follows it; docs/model-notes.md)."""
     a, b, kind = select_contacts(cells, candidate_pairs(cells, reach), reach, always_closest=True)
     parts = [(a, b, kind)]
     for j, plane in enumerate(planes):
         found = plane_contacts(cells, [plane], reach)
         parts.append((found.cell_a, np.full(len(found), -1 - j), found.kind))
     a, b, kind = (np.concatenate(x) for x in zip(*parts, strict=True))
-    return _ContactSet(a, b, kind)
+    return _Tracked.of(a, b, kind, span)
 
 
-def _evaluate(cells: Cells, found: _ContactSet, planes: Sequence[Plane], planar: bool) -> Contacts:
+def _evaluate(cells: Cells, found: _Tracked, planes: Sequence[Plane], planar: bool) -> Contacts:
     """The contacts of ``found`` at the cells' present positions, in the order of ``found``."""
     pairwise = found.b >= 0
     parts = [evaluate_contacts(cells, found.a[pairwise], found.b[pairwise], found.kind[pairwise], planar=planar)]
@@ -281,19 +337,46 @@ def _evaluate(cells: Cells, found: _ContactSet, planes: Sequence[Plane], planar:
     return concatenate(parts).subset(np.argsort(np.concatenate(order), kind="stable"))
 
 
-#: A linearization whose update leaves a larger overlap than this (fraction of the diameter, and
-#: more than before it) is backtracked half way, at most :data:`MAX_BACKTRACKS` times a step.
-BACKTRACK_OVERLAP = 0.5
-MAX_BACKTRACKS = 6
-
-
 def _diameters(cells: Cells, contacts: Contacts) -> np.ndarray:
     """(K,) ``ρ_a + ρ_b`` (``2ρ_a`` against a plane)."""
     rho_a = cells.radii[contacts.cell_a]
     return rho_a + np.where(contacts.cell_b >= 0, cells.radii[np.maximum(contacts.cell_b, 0)], rho_a)
 
 
-def _bounds(system: Any, cells: Cells, drive: np.ndarray, impulses: np.ndarray, dt: float,
+@dataclass(frozen=True)
+class _Floors:
+    """Overlap present at the start of the step sets the floor of its own pair's target:
+    ``min(0, d_start + relaxation·(ρ_a + ρ_b))``, per pair key (:data:`KIND_BITS` dropped)."""
+
+    pairs: np.ndarray
+    values: np.ndarray
+
+    def targets(self, found: _Tracked) -> np.ndarray:
+        """(K,) the target separation of each contact of ``found`` [length]."""
+        if self.pairs.size == 0:
+            return np.zeros(found.keys.size)
+        pair = found.keys >> KIND_BITS
+        where = np.minimum(np.searchsorted(self.pairs, pair), self.pairs.size - 1)
+        return np.where(self.pairs[where] == pair, np.minimum(0.0, self.values[where]), 0.0)
+
+
+def _start(cells: Cells, planes: Sequence[Plane], planar: bool, span: int,
+           settings: PositionSettings) -> tuple[_Floors, float]:
+    """The floors of the targets and the largest overlap at the start of the step."""
+    found = _detect(cells, planes, 0.0, span)
+    start = _evaluate(cells, found, planes, planar)
+    diameter = _diameters(cells, start)
+    overlapping = start.separation < 0
+    pairs = found.keys[overlapping] >> KIND_BITS
+    values = start.separation[overlapping] + settings.relaxation * diameter[overlapping]
+    order = np.argsort(pairs)
+    return _Floors(pairs[order], values[order]), float(np.max(-start.separation / diameter, initial=0.0))
+
+
+# ---------------------------------------------------------------------------------------------
+# One linearization: the QP of the step's contacts at the moved positions
+# ---------------------------------------------------------------------------------------------
+def _bounds(system: ContactSystem, cells: Cells, drive: np.ndarray, impulses: np.ndarray, dt: float,
             settings: PositionSettings) -> tuple[np.ndarray, np.ndarray]:
     """Bounds on the scaled unknowns ỹ: turning (total and per iteration) and shrinking."""
     n = system.shape[1]
@@ -317,47 +400,68 @@ def _bounds(system: Any, cells: Cells, drive: np.ndarray, impulses: np.ndarray, 
     return lower, upper
 
 
-def position_step(
-    cells: Cells,
-    dt: float,
-    *,
-    drive: np.ndarray | None = None,
-    planes: Sequence[Plane] = (),
-    planar: bool | None = None,
-    settings: PositionSettings | None = None,
-    ids: np.ndarray | None = None,
-    warm: ContactImpulses | None = None,
-    on_failure: str = "raise",
-) -> PositionStepResult:
-    """Advance overdamped cells by ``dt`` with non-penetration at the end of the step (module
-    docstring).
+def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray, diameter: np.ndarray,
+               dt: float, drive: np.ndarray, impulses: np.ndarray, planar: bool,
+               settings: PositionSettings) -> tuple[ContactSystem, Problem] | None:
+    """The QP of one linearization (module docstring), or None when no contact asks for a push.
 
-    Args:
-        cells: the state at time ``t`` (its momenta are ignored: overdamped dynamics).
-        dt: the time step [time], > 0.
-        drive: (N, 7) driving momenta ``(p, L, g)`` (growth, user forces) [momentum units];
-            None = 0.
-        planes: static planes (:class:`qpcontact.geometry.Plane`).
-        planar: the scene is a monolayer in the xy-plane (planar unknowns only); None: detected
-            (:meth:`~qpcontact.geometry.Cells.is_monolayer` of the cells with the driving momenta,
-            and every plane's normal in the xy-plane).
-        settings: :class:`PositionSettings` (defaults if None).
-        ids: (N,) cell ids that stay with the cells from step to step (default: their indices),
-            the keys of the warm start.
-        warm: contact impulses of the previous step (its result's ``warm``): the first solve of
-            a solver that takes a warm start starts from them, contact by contact; later solves
-            of the step start from the previous solve's.
-        on_failure: ``"raise"`` a :class:`~qpcontact.errors.StepFailedError` when the step does
-            not converge (default), or ``"return"`` the unconverged result.
+    The unknowns are the impulses of the whole step in the cells' frame at the start of the step
+    (its axes, its masses and inertia, as :func:`move` uses them), and each row is the exact
+    derivative of the contact's separation at the moved positions: rotations enter through the
+    left Jacobian of each cell's turn (:class:`qpcontact.assembly.system.Turned`), so in 3D the
+    linearization is exact to first order (turning about the moved axes instead, as this step did
+    until 2026-12, made the linearizations converge only linearly: 3–6 per step)."""
+    turned = Turned(axes=now.axes, jacobian=left_jacobian(turning_vectors(cells, dt, drive + impulses)))
+    # d_k + dt·(J W (x_new − x))_k ≥ target_k + aim  ⇔  (J W x_new)_k ≥ (target_k + aim − d_k)/dt + (J W x)_k
+    b = (target + settings.aim * diameter - contacts.separation) / dt + velocity_changes(cells, contacts, impulses,
+                                                                                           turned)
+    if not np.any(b > 0):
+        return None
+    system = build_system(cells, contacts, b, planar=planar, turned=turned)
+    lower, upper = _bounds(system, cells, drive, impulses, dt, settings) if settings.bounded else (None, None)
+    return system, Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper)
 
-    Returns:
-        A :class:`PositionStepResult`.
 
-    Raises:
-        StepFailedError: the step did not reach the overlap tolerance (``on_failure="raise"``),
-            or a solve failed; nothing is applied.
-        InvalidArgumentError: bad arguments.
-    """
+def _turn_limited(system: ContactSystem, problem: Problem, y: np.ndarray) -> int:
+    """Cells whose turning sits on a bound in the answer ``y``."""
+    if problem.lower is None or problem.upper is None:
+        return 0
+    turning = np.flatnonzero((system.column_slot == 4) | (system.column_slot == 5))
+    lower, upper = problem.lower[turning], problem.upper[turning]
+    span = np.maximum(upper - lower, 1e-300)
+    at_bound = np.minimum(y[turning] - lower, upper - y[turning]) <= 1e-3 * span
+    return int(np.unique(system.column_cell[turning[at_bound]]).size)
+
+
+# ---------------------------------------------------------------------------------------------
+# The step
+# ---------------------------------------------------------------------------------------------
+#: A linearization whose update leaves a larger overlap than this (fraction of the diameter, and
+#: more than before it) is backtracked half way, at most :data:`MAX_BACKTRACKS` times a step.
+BACKTRACK_OVERLAP = 0.5
+MAX_BACKTRACKS = 6
+
+
+@dataclass
+class _Progress:
+    """What the linearizations of a step carry from one to the next."""
+
+    impulses: np.ndarray
+    found: _Tracked
+    previous: np.ndarray | None = None  # the impulses of the last kept iterate
+    relaxation: float = 1.0  # the fraction of each update taken
+    backtracks: int = 0
+    overlaps: list[float] = field(default_factory=list)
+    last: ContactImpulses = field(default_factory=ContactImpulses.empty)  # the last solve's, keyed by ids
+    solver_iterations: int = 0
+    turn_limited: int = 0
+
+
+def _checked(cells: Cells, dt: float, drive: np.ndarray | None, planes: Sequence[Plane], planar: bool | None,
+             settings: PositionSettings | None, ids: np.ndarray | None, warm: ContactImpulses | None,
+             motion: CellMotion | None, parents: np.ndarray | None, on_failure: str) -> tuple[PositionSettings, SolverSpec, np.ndarray, list[Plane], bool, np.ndarray]:
+    """The arguments of :func:`position_step`, checked: ``(settings, solver, drive, planes,
+    planar, ids)``."""
     settings = PositionSettings() if settings is None else settings
     if not isinstance(settings, PositionSettings):
         raise InvalidArgumentError(f"settings: expected PositionSettings, got {type(settings).__name__}")
@@ -380,80 +484,128 @@ def position_step(
         raise InvalidArgumentError(f"ids: expected {n} integers, got {ids.dtype} of shape {ids.shape}")
     if warm is not None and not isinstance(warm, ContactImpulses):
         raise InvalidArgumentError(f"warm: expected ContactImpulses, got {type(warm).__name__}")
+    if motion is not None and not isinstance(motion, CellMotion):
+        raise InvalidArgumentError(f"motion: expected CellMotion, got {type(motion).__name__}")
+    if parents is not None and (np.shape(parents) != (n,) or not np.issubdtype(np.asarray(parents).dtype, np.integer)):
+        raise InvalidArgumentError(f"parents: expected {n} integers, got shape {np.shape(parents)}")
     drive = np.zeros((n, 7)) if drive is None else np.asarray(drive, dtype=float)
     if drive.shape != (n, 7) or not np.all(np.isfinite(drive)):
         raise InvalidArgumentError(f"drive: expected finite values of shape ({n}, 7), got shape {drive.shape}")
     if planar is None:  # a monolayer whose driving momenta and planes keep it in its plane
         moving = cells.replace(momenta=drive[:, 0:3], angular_momenta=drive[:, 3:6], growth_momenta=drive[:, 6])
         planar = moving.is_monolayer() and all(abs(plane.normal[2]) == 0 for plane in planes)
+    return settings, spec, drive, planes, bool(planar), ids
+
+
+def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known: np.ndarray,
+           iteration: int, settings: PositionSettings) -> bool:
+    """Record the overlap of this iterate and decide on damping; True when the iterate is to be
+    backtracked (not kept) instead."""
+    progress.overlaps.append(float(np.max(-contacts.separation / diameter, initial=0.0)))
+    overlaps = progress.overlaps
+    # A linearization that left a larger overlap on a contact it knew has met the curvature of
+    # turning (an SQP iterate can then alternate between two states): later updates go half
+    # way. A larger overlap on a contact found only now (a cell pushed far, into a neighbour
+    # beyond the search margin) says nothing about the linearization: full updates go on.
+    worst = int(np.argmax(-contacts.separation / diameter)) if len(contacts) else -1
+    if len(overlaps) >= 2 and overlaps[-1] > overlaps[-2] and np.isin(progress.found.keys[worst], known):
+        progress.relaxation = 0.5
+    # An update that put cells deep into each other (rods crossing: the linearization of a
+    # nearly infeasible jam, far outside where it holds) is not kept: back half way to the
+    # last iterate and look again (measured: a newborn squeezed in a 27,601-cell colony went
+    # from 0.15 to 1.0, rods through each other, and no later linearization separated them).
+    if (progress.previous is not None and overlaps[-1] > max(BACKTRACK_OVERLAP, overlaps[-2])
+            and progress.backtracks < MAX_BACKTRACKS and iteration < settings.max_iterations):
+        progress.impulses = progress.previous + 0.5 * (progress.impulses - progress.previous)
+        progress.backtracks += 1
+        progress.relaxation = 0.5
+        overlaps.pop()
+        return True
+    return False
+
+
+def position_step(
+    cells: Cells,
+    dt: float,
+    *,
+    drive: np.ndarray | None = None,
+    planes: Sequence[Plane] = (),
+    planar: bool | None = None,
+    settings: PositionSettings | None = None,
+    ids: np.ndarray | None = None,
+    warm: ContactImpulses | None = None,
+    motion: CellMotion | None = None,
+    parents: np.ndarray | None = None,
+    on_failure: str = "raise",
+) -> PositionStepResult:
+    """Advance overdamped cells by ``dt`` with non-penetration at the end of the step (module
+    docstring). The phases of each linearization: move the cells, find and evaluate the contacts
+    (:func:`_detect`, :func:`_evaluate`), judge the iterate (:func:`_judge`: converged,
+    backtracked, damped), build its QP (:func:`_linearize`), solve it.
+
+    Args:
+        cells: the state at time ``t`` (its momenta are ignored: overdamped dynamics).
+        dt: the time step [time], > 0.
+        drive: (N, 7) driving momenta ``(p, L, g)`` (growth, user forces) [momentum units];
+            None = 0.
+        planes: static planes (:class:`qpcontact.geometry.Plane`).
+        planar: the scene is a monolayer in the xy-plane (planar unknowns only); None: detected
+            (:meth:`~qpcontact.geometry.Cells.is_monolayer` of the cells with the driving momenta,
+            and every plane's normal in the xy-plane).
+        settings: :class:`PositionSettings` (defaults if None).
+        ids: (N,) cell ids that stay with the cells from step to step (default: their indices),
+            the keys of the warm start.
+        warm: contact impulses of the previous step (its result's ``warm``): the first solve of
+            a solver that takes a warm start starts from them, contact by contact; later solves
+            of the step start from the previous solve's.
+        motion: the motion of the previous step (its result's ``motion``): the first
+            linearization also holds the contacts the cells would make if they moved as they did
+            then (:class:`CellMotion`); None: only those around the free motion.
+        parents: (N,) each cell's parent id, so that a cell born since the previous step moves
+            with its mother in that prediction (``motion``); None: such cells stay.
+        on_failure: ``"raise"`` a :class:`~qpcontact.errors.StepFailedError` when the step does
+            not converge (default), or ``"return"`` the unconverged result.
+
+    Returns:
+        A :class:`PositionStepResult`.
+
+    Raises:
+        StepFailedError: the step did not reach the overlap tolerance (``on_failure="raise"``),
+            or a solve failed; nothing is applied.
+        InvalidArgumentError: bad arguments.
+    """
+    settings, spec, drive, planes, planar, ids = _checked(cells, dt, drive, planes, planar, settings, ids, warm,
+                                                          motion, parents, on_failure)
+    n, span = cells.n, cells.n + len(planes) + 1
     form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
     times = {"detect": 0.0, "assemble": 0.0, "solve": 0.0}
-    t_start = time.perf_counter()
+    t_start = t0 = time.perf_counter()
     reach = settings.margin * 2.0 * float(np.median(cells.radii)) if n else 0.0
-    # Overlap at the start of the step sets the floor of its own pair's target.
-    t0 = time.perf_counter()
-    start_found = _detect(cells, planes, 0.0, planar)
-    start = _evaluate(cells, start_found, planes, planar)
-    start_diameter = _diameters(cells, start)
-    start_overlap = float(np.max(-start.separation / start_diameter, initial=0.0))
-    n_planes = len(planes)
-    overlapping = start.separation < 0
-    floor_keys = start_found.key(n_planes, n)[overlapping] // 8  # a pair (or a cell and a plane)
-    floor_value = start.separation[overlapping] + settings.relaxation * start_diameter[overlapping]
-    order = np.argsort(floor_keys)
-    floor_keys, floor_value = floor_keys[order], floor_value[order]
+    floors, start_overlap = _start(cells, planes, planar, span, settings)
     times["detect"] += time.perf_counter() - t0
-
-    impulses = np.zeros((n, 7))
-    found = _ContactSet(*(np.zeros(0, dtype=np.intp),) * 3)
-    overlaps: list[float] = []
-    relaxation = 1.0
-    solver_iterations = 0
-    last = ContactImpulses.empty() if warm is None else warm  # keyed by ids
-    turn_limited = 0
-    converged, message, iteration = False, "", 0
-    previous: np.ndarray | None = None  # the impulses of the last kept iterate
-    keys = found.key(n_planes, n)
-    backtracks = 0
+    empty = np.zeros(0, dtype=np.intp)
+    progress = _Progress(impulses=np.zeros((n, 7)), found=_Tracked(empty, empty, empty, empty.astype(np.int64)),
+                         last=ContactImpulses.empty() if warm is None else warm)
+    converged, message, iteration, excess = False, "", 0, 0.0
     for iteration in range(settings.max_iterations + 1):
-        now = move(cells, dt, drive + impulses)
+        now = move(cells, dt, drive + progress.impulses)
         t0 = time.perf_counter()
         # Every linearization searches the whole margin: a cell pushed out of a jam can move a
         # diameter against a neighbour within one linearization (measured on a grown colony of
         # 10⁴ cells, with half the margin after the first: 0.14 of a diameter of overlap at the
         # seventh linearization, with a pair found only then).
-        known = keys  # the contacts of the last linearization
-        found = found.union(_detect(now, planes, reach, planar), n_planes, n)
-        keys = found.key(n_planes, n)
-        contacts = _evaluate(now, found, planes, planar)
-        times["detect"] += time.perf_counter() - t0
+        known = progress.found.keys
+        progress.found = progress.found.union(_detect(now, planes, reach, span), span)
+        if iteration == 0 and motion is not None:
+            predicted = motion.predict(cells.replace(lengths=now.lengths), ids, dt, parents)
+            progress.found = progress.found.union(_detect(predicted, planes, reach, span), span)
+        contacts = _evaluate(now, progress.found, planes, planar)
         diameter = _diameters(now, contacts)
-        overlaps.append(float(np.max(-contacts.separation / diameter, initial=0.0)))
-        # A linearization that left a larger overlap on a contact it knew has met the curvature of
-        # turning (an SQP iterate can then alternate between two states): later updates go half
-        # way. A larger overlap on a contact found only now (a cell pushed far, into a neighbour
-        # beyond the search margin) says nothing about the linearization: full updates go on.
-        worst = int(np.argmax(-contacts.separation / diameter)) if len(contacts) else -1
-        if len(overlaps) >= 2 and overlaps[-1] > overlaps[-2] and np.isin(keys[worst], known):
-            relaxation = 0.5
-        # An update that put cells deep into each other (rods crossing: the linearization of a
-        # nearly infeasible jam, far outside where it holds) is not kept: back half way to the
-        # last iterate and look again (measured: a newborn squeezed in a 27,601-cell colony went
-        # from 0.15 to 1.0, rods through each other, and no later linearization separated them).
-        if (previous is not None and overlaps[-1] > max(BACKTRACK_OVERLAP, overlaps[-2])
-                and backtracks < MAX_BACKTRACKS and iteration < settings.max_iterations):
-            impulses = previous + 0.5 * (impulses - previous)
-            backtracks += 1
-            relaxation = 0.5
-            overlaps.pop()
+        times["detect"] += time.perf_counter() - t0
+        if _judge(progress, contacts, diameter, known, iteration, settings):
             continue
-        target = np.zeros(len(contacts))
-        if floor_keys.size:
-            pair = keys // 8
-            where = np.minimum(np.searchsorted(floor_keys, pair), floor_keys.size - 1)
-            target = np.where(floor_keys[where] == pair, np.minimum(0.0, floor_value[where]), 0.0)
-        shortfall = (target - contacts.separation) / diameter
-        excess = float(np.max(shortfall, initial=0.0))
+        target = floors.targets(progress.found)
+        excess = float(np.max((target - contacts.separation) / diameter, initial=0.0))
         # The free motion itself may be within the tolerance (nothing pushes): nothing to solve
         # (and a solve would be ill-posed: its right-hand side, the scale of the problem, is ~0).
         if excess <= settings.overlap_tolerance:
@@ -463,58 +615,44 @@ def position_step(
             message = (f"largest overlap beyond its target {excess:.3g} of a diameter after {iteration} "
                        f"linearizations (tolerance {settings.overlap_tolerance:g})")
             break
-        if len(contacts) == 0:
-            impulses = np.zeros((n, 7))
-            continue
         t0 = time.perf_counter()
-        # Masses and inertia of the start of the step (as move() uses them), geometry of now.
-        frame = now.replace(lengths=cells.lengths)
-        current = frame.replace(momenta=impulses[:, 0:3], angular_momenta=impulses[:, 3:6],
-                                growth_momenta=impulses[:, 6])
-        u = relative_normal_velocity(current, contacts.cell_a, contacts.cell_b, contacts.normal, contacts.offset_a,
-                                     contacts.offset_b, contacts.stretch_a, contacts.stretch_b)
-        b = (target + settings.aim * diameter - contacts.separation) / dt + u
-        if not np.any(b > 0):  # nothing asks for a push: the free motion is the answer
-            impulses = np.zeros((n, 7))
-            last = ContactImpulses.empty()
-            times["assemble"] += time.perf_counter() - t0
-            continue
-        system = build_system(frame, contacts, b, planar=bool(planar))
-        lower, upper = _bounds(system, cells, drive, impulses, dt, settings) if settings.bounded else (None, None)
-        problem = Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper)
+        linear = _linearize(cells, now, contacts, target, diameter, dt, drive, progress.impulses, planar, settings)
         times["assemble"] += time.perf_counter() - t0
-        key_a, key_b = ids[found.a], np.where(found.b >= 0, ids[np.maximum(found.b, 0)], found.b)
-        initial = None
-        if spec.warm_start:
-            initial = system.from_contact_impulses(last.lookup(key_a, key_b, found.kind))
+        if linear is None:  # nothing asks for a push: the free motion is the answer
+            progress.impulses, progress.last = np.zeros((n, 7)), ContactImpulses.empty()
+            continue
+        system, problem = linear
+        key_a, key_b = ids[progress.found.a], np.where(progress.found.b >= 0, ids[np.maximum(progress.found.b, 0)],
+                                                       progress.found.b)
+        initial = system.from_contact_impulses(progress.last.lookup(key_a, key_b, progress.found.kind)) \
+            if spec.warm_start else None
         t0 = time.perf_counter()
         out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial)
         times["solve"] += time.perf_counter() - t0
-        solver_iterations += out.iterations or 0
+        progress.solver_iterations += out.iterations or 0
         if not out.found or out.y is None or not np.all(np.isfinite(out.y)):
             message = f"{settings.solver} failed at linearization {iteration}: {out.status} {out.error or ''}".strip()
             break
         lam = system.to_contact_impulses(out.lam) if out.lam is not None else np.zeros(len(contacts))
-        last = ContactImpulses(key_a, key_b, found.kind.copy(), lam)
-        if lower is not None and upper is not None:
-            turning = np.flatnonzero((system.column_slot == 4) | (system.column_slot == 5))
-            span = np.maximum(upper[turning] - lower[turning], 1e-300)
-            at_bound = (np.minimum(out.y[turning] - lower[turning], upper[turning] - out.y[turning]) <= 1e-3 * span)
-            turn_limited = int(np.unique(system.column_cell[turning[at_bound]]).size)
-        previous = impulses
-        impulses = impulses + relaxation * (system.to_impulses(out.y) - impulses)
-    end = now  # the loop always ends on a detection at the positions of the impulses it kept
+        progress.last = ContactImpulses(key_a, key_b, progress.found.kind.copy(), lam)
+        progress.turn_limited = _turn_limited(system, problem, out.y)
+        progress.previous = progress.impulses
+        progress.impulses = progress.impulses + progress.relaxation * (system.to_impulses(out.y) - progress.impulses)
+    # The loop always ends on a detection at the positions of the impulses it kept.
     if iteration == 0:
-        last = ContactImpulses.empty()  # nothing was solved: no contact pushed in this step
-    key_a, key_b = ids[found.a], np.where(found.b >= 0, ids[np.maximum(found.b, 0)], found.b)
-    impulse_of_contact = last.lookup(key_a, key_b, found.kind)
+        progress.last = ContactImpulses.empty()  # nothing was solved: no contact pushed in this step
+    key_a, key_b = ids[progress.found.a], np.where(progress.found.b >= 0, ids[np.maximum(progress.found.b, 0)],
+                                                   progress.found.b)
+    impulse_of_contact = progress.last.lookup(key_a, key_b, progress.found.kind)
     times["total"] = time.perf_counter() - t_start
     result = PositionStepResult(
-        cells=end, impulses=impulses, converged=converged, iterations=iteration, contacts=contacts,
-        contact_impulses=impulse_of_contact, overlaps=overlaps, start_overlap=start_overlap,
+        cells=now, impulses=progress.impulses, converged=converged, iterations=iteration, contacts=contacts,
+        contact_impulses=impulse_of_contact, overlaps=progress.overlaps, start_overlap=start_overlap,
         max_overlap=float(np.max(-contacts.separation / diameter, initial=0.0)), excess=excess, times=times,
-        solver_iterations=solver_iterations, message=message,
-        warm=ContactImpulses(key_a, key_b, found.kind.copy(), impulse_of_contact), turn_limited=turn_limited)
+        solver_iterations=progress.solver_iterations, message=message,
+        warm=ContactImpulses(key_a, key_b, progress.found.kind.copy(), impulse_of_contact),
+        turn_limited=progress.turn_limited,
+        motion=CellMotion.of(cells, now, ids, dt, drive + progress.impulses))
     if not converged and on_failure == "raise":
         raise StepFailedError(f"position step did not converge: {message}", result)
     return result

@@ -13,7 +13,7 @@ snapshots, its stop on Ctrl-C, and how it continues.
   during a step abandons that step (nothing of it is applied, the random generator is put back)
   and the run ends with the state reached, which is saved; one that arrives between steps ends
   the run after the step. A second Ctrl-C while the outputs are written does not stop the saving.
-- TOML: :func:`write_toml` / :func:`read_toml`, a flat table of settings (``config.toml``).
+- TOML: :func:`write_toml` / :func:`read_toml`, the settings' tables (``config.toml``).
 
 Resuming: a run continued from a snapshot of step S (``qpcontact simulate --resume`` or
 ``--start OUT/snapshots/step_S.npz`` with ``--out OUT``) starts at step index S, with the
@@ -45,17 +45,21 @@ import numpy as np
 from ..errors import InvalidArgumentError, OutputFolderError
 from ..outputs import atomic_write, earlier_outputs, prepare_folder, write_text
 from .growth import Colony
+from .mechanics import CellMechanics
 from .snapshots import Snapshot, save_colony
 
 #: Columns of ``history.csv``, one row per step.
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
-                  "step_seconds", "penetration", "complementarity", "rejected", "linearizations")
+                  "step_seconds", "penetration", "complementarity", "rejected", "linearizations", "mean_pressure",
+                  "max_pressure")
+#: Columns a history written before they existed lacks: read as NaN (not measured).
+LATER_FIELDS = ("mean_pressure", "max_pressure")
 #: Columns that measure the machine, not the trajectory (they differ between two runs of the
 #: same trajectory).
 TIMING_FIELDS = ("solve_seconds", "step_seconds")
 #: Every file a run writes in its folder (glob patterns, relative to it).
 RUN_OUTPUTS = ("config.toml", "history.csv", "snapshots/step_*.npz", "colony.png", "history.png", "colony.gif",
-               "colony.pvd", "vtk/step_*.vtu")
+               "colony.pvd", "vtk/step_*.vtu", "pressure.png")
 #: Temporary files of writes that a killed process left (``qpcontact.outputs.replacing``).
 LEFTOVERS = (".*.tmp", "snapshots/.*.tmp", "vtk/.*.tmp")
 _STEP_FILE = re.compile(r"step_(\d+)\.(npz|vtu)")
@@ -137,20 +141,24 @@ class RunFolder:
     def read_history_rows(self) -> list[dict[str, str]]:
         """The rows of ``history.csv`` as text (none if it does not exist).
 
+        A history written before the columns of :data:`LATER_FIELDS` existed is read with them
+        as ``nan`` (so an earlier run can be resumed).
+
         Raises:
             OutputFolderError: it has other columns than :data:`HISTORY_FIELDS`.
         """
         if not self.history_path.exists():
             return []
+        earlier = tuple(name for name in HISTORY_FIELDS if name not in LATER_FIELDS)
         with self.history_path.open(newline="") as fh:
             reader = csv.DictReader(fh)
-            if tuple(reader.fieldnames or ()) != HISTORY_FIELDS:
+            if tuple(reader.fieldnames or ()) not in (HISTORY_FIELDS, earlier):
                 raise OutputFolderError(f"{self.history_path}: not the history of a qpcontact run (columns "
                                         f"{reader.fieldnames})")
             rows = list(reader)
         if any(None in row or None in row.values() for row in rows):
             raise OutputFolderError(f"{self.history_path}: has rows of the wrong length (a truncated file?)")
-        return rows
+        return [{**dict.fromkeys(LATER_FIELDS, "nan"), **row} for row in rows]
 
     def read_history(self) -> dict[str, list[float]]:
         """``history.csv`` by column, as numbers (the whole run, earlier attempts included)."""
@@ -175,13 +183,17 @@ class RunFolder:
         return self.path / "snapshots" / f"step_{step:06d}.npz"
 
     def save_snapshot(self, colony: Colony, step: int, *, settings: Mapping[str, Any] | None = None,
-                      rng: np.random.Generator | None = None, extra: Mapping[str, Any] | None = None) -> Path:
-        """Save the state of step ``step`` (atomically; and its ParaView file with ``vtk``)."""
-        path = self._note(save_colony(self.snapshot_path(step), colony, step, settings=settings, rng=rng, extra=extra))
+                      rng: np.random.Generator | None = None, extra: Mapping[str, Any] | None = None,
+                      mechanics: CellMechanics | None = None) -> Path:
+        """Save the state of step ``step`` (atomically; and its ParaView file with ``vtk``), with
+        the cells' pressure and stress if ``mechanics`` is given."""
+        path = self._note(save_colony(self.snapshot_path(step), colony, step, settings=settings, rng=rng, extra=extra,
+                                      mechanics=mechanics))
         if self.vtk:
             from .paraview import write_series, write_vtu  # meshio: only when asked for
 
-            vtu = self._note(write_vtu(self.path / "vtk" / f"step_{step:06d}.vtu", colony, step=step))
+            vtu = self._note(write_vtu(self.path / "vtk" / f"step_{step:06d}.vtu", colony, step=step,
+                                       mechanics=mechanics))
             self._series = [(t, p) for t, p in self._series if p != vtu] + [(colony.time, vtu)]
             self._note(write_series(self.path / "colony.pvd", self._series))
         return path
@@ -283,6 +295,8 @@ class Interrupt:
 
 # -- TOML ---------------------------------------------------------------------------------
 def _toml_value(value: Any) -> str:
+    if value is None:
+        return '"none"'  # TOML has no null; the settings read "none" as None
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int):
@@ -295,31 +309,33 @@ def _toml_value(value: Any) -> str:
         return repr(value)
     if isinstance(value, str):
         return json.dumps(value)  # a TOML basic string: JSON's escapes are TOML's
-    raise InvalidArgumentError(f"TOML: cannot write {value!r} (only flat tables of numbers, booleans and strings)")
+    raise InvalidArgumentError(f"TOML: cannot write {value!r} (only numbers, booleans and strings, in tables)")
 
 
 def write_toml(values: Mapping[str, Any], comment: str = "") -> str:
-    """A flat TOML table of numbers, booleans and strings, with a comment on top; read back
-    equal by :func:`read_toml` (floats exactly)."""
+    """TOML of numbers, booleans and strings (None as ``"none"``), at the top and in one level
+    of tables (``{"run": {"cells": 500}}`` is ``[run]`` / ``cells = 500``), with a comment on
+    top; read back equal by :func:`read_toml` (floats exactly)."""
     head = "".join(f"# {line}\n" for line in comment.splitlines())
-    return head + "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items())
+    text = head + "".join(f"{key} = {_toml_value(value)}\n" for key, value in values.items()
+                          if not isinstance(value, Mapping))
+    for name, values_of_table in values.items():
+        if isinstance(values_of_table, Mapping):
+            text += f"\n[{name}]\n" + "".join(f"{key} = {_toml_value(value)}\n" for key, value in values_of_table.items())
+    return text
 
 
-def read_toml(path: str | Path, tables: Sequence[str] = ()) -> dict[str, Any]:
-    """A flat TOML table; the tables named in ``tables`` (e.g. ``[sweep]``) are kept as they are.
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """A TOML file as a mapping (what its tables and keys mean is the reader's:
+    :func:`qpcontact.colony.settings.file_layer`).
 
     Raises:
-        InvalidArgumentError: the file is missing, not TOML, or has nested tables or arrays
-            other than ``tables``.
+        InvalidArgumentError: the file is missing or not TOML.
     """
     try:
         with open(path, "rb") as fh:
-            values = tomllib.load(fh)
+            return tomllib.load(fh)
     except FileNotFoundError:
         raise InvalidArgumentError(f"{path}: no such file") from None
     except (OSError, tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InvalidArgumentError(f"{path}: not a TOML file ({exc})") from None
-    nested = [key for key, value in values.items() if isinstance(value, (dict, list)) and key not in tables]
-    if nested:
-        raise InvalidArgumentError(f"{path}: only 'name = value' lines are read; {', '.join(nested)} is a table or array")
-    return values

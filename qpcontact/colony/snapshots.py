@@ -37,12 +37,23 @@ key                    shape        meaning
                                     digits, ``_ . -``), e.g. a solver's warm-start data;
                                     numeric or boolean, no objects
 ``qpcontact_version``  ()           the qpcontact version that wrote the file (information)
+``pressure``           (N,)         each cell's pressure over the step that led to this state,
+                                    compressive positive (:func:`qpcontact.cell_pressure`),
+                                    finite
+``stress``             (N, 3, 3)    each cell's virial stress, tension positive
+                                    (:func:`qpcontact.cell_stress`), finite
+``stress_dimensions``  ()           2: stress and pressure per footprint area (a monolayer;
+                                    [force/length]); 3: per volume ([force/length²]).
+                                    The three come together or not at all
 ``checksum``           ()           SHA-256 (hex string) of every other array: its name, dtype,
                                     shape and bytes, in the order of the names
                                     (:func:`array_checksum`); written since issue 19
+                                    (covers the mechanics keys too)
 =====================  ===========  =========================================================
 
-Version 1 is the same without the optional keys. A run can start from either
+Version 1 is the same without the optional keys. Files with the mechanics keys are still
+version 2: readers that do not know them ignore them, and files without them load with
+``mechanics`` None. A run can start from either
 (``qpcontact simulate --start FILE``): from version 1, or a file without ``rng_state``, the
 random generator starts from the run's seed. Other tools may write either version.
 
@@ -78,6 +89,7 @@ from ..errors import InvalidSnapshotError, QPContactError
 from ..geometry import Cells
 from ..outputs import atomic_write
 from .growth import Colony
+from .mechanics import CellMechanics
 
 FORMAT = "qpcontact-colony"
 VERSION = 2
@@ -86,6 +98,8 @@ SUPPORTED_VERSIONS = (1, 2)
 CELL_FIELDS = tuple(f.name for f in dataclasses.fields(Cells))
 COLONY_FIELDS = ("ids", "parent_ids", "rates", "owed")
 SCALAR_FIELDS = ("time", "step", "next_id")
+#: The keys of the cells' mechanics (optional, all three or none).
+MECHANICS_FIELDS = ("pressure", "stress", "stress_dimensions")
 #: Key of the checksum of the other arrays (:func:`array_checksum`).
 CHECKSUM = "checksum"
 #: Prefix of the keys of the extra arrays.
@@ -105,6 +119,8 @@ class Snapshot:
         extra: the extra arrays, by name.
         version: the file's format version.
         path: where it was read from.
+        mechanics: each cell's pressure and stress over the step that led to this state (None
+            if not stored).
     """
 
     colony: Colony
@@ -114,6 +130,7 @@ class Snapshot:
     extra: dict[str, np.ndarray] = field(default_factory=dict)
     version: int = VERSION
     path: Path | None = None
+    mechanics: CellMechanics | None = None
 
     def generator(self) -> np.random.Generator | None:
         """A random generator in the stored state (None if none is stored)."""
@@ -158,7 +175,7 @@ def load_cells(path: str | Path) -> Cells:
 
 def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: Mapping[str, Any] | None = None,
                 rng: np.random.Generator | Mapping[str, Any] | None = None,
-                extra: Mapping[str, Any] | None = None) -> Path:
+                extra: Mapping[str, Any] | None = None, mechanics: CellMechanics | None = None) -> Path:
     """Write ``colony`` to ``path`` (format version 2, module docstring), atomically.
 
     Args:
@@ -169,9 +186,15 @@ def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: M
         rng: the run's random generator (or its ``bit_generator.state``), stored to continue the
             run on the same random numbers.
         extra: extra arrays by name (e.g. a solver's warm-start data).
+        mechanics: each cell's pressure and stress (:class:`~qpcontact.colony.CellMechanics`),
+            stored as ``pressure``, ``stress`` and ``stress_dimensions``.
 
     Returns:
         The path written.
+
+    Raises:
+        InvalidSnapshotError: extra arrays that cannot be stored, or mechanics whose shapes do
+            not match the colony.
     """
     path = npz_path(path)
     arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION), "time": np.array(float(colony.time)),
@@ -190,6 +213,13 @@ def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: M
             raise InvalidSnapshotError(f"{path}: extra array {name!r}: names are letters, digits and _ . -, "
                                        "values numeric or boolean arrays")
         arrays[EXTRA_PREFIX + name] = value
+    if mechanics is not None:
+        n = colony.cells.n
+        if np.shape(mechanics.pressure) != (n,) or np.shape(mechanics.stress) != (n, 3, 3):
+            raise InvalidSnapshotError(f"{path}: mechanics: expected pressure ({n},) and stress ({n}, 3, 3), got "
+                                       f"{np.shape(mechanics.pressure)} and {np.shape(mechanics.stress)}")
+        arrays.update(pressure=np.asarray(mechanics.pressure, dtype=float), stress=np.asarray(mechanics.stress, dtype=float),
+                      stress_dimensions=np.array(2 if mechanics.planar else 3, dtype=np.int64))
     arrays[CHECKSUM] = np.array(array_checksum({name: np.asarray(value) for name, value in arrays.items()}))
     return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
 
@@ -283,7 +313,7 @@ def load_snapshot(path: str | Path) -> Snapshot:
                                            data["owed"], time=float(time), next_id=next_id))
     snapshot = Snapshot(colony, step, _json_object(path, data, "settings"), _json_object(path, data, "rng_state"),
                         {k[len(EXTRA_PREFIX):]: v for k, v in data.items() if k.startswith(EXTRA_PREFIX)}, version,
-                        Path(path))
+                        Path(path), _mechanics(path, data, colony.cells.n))
     if snapshot.rng_state is not None:
         snapshot.generator()  # checked now, not when the run is half set up
     return snapshot
@@ -351,6 +381,22 @@ def _json_object(path: str | Path, data: Mapping[str, np.ndarray], name: str) ->
     if not isinstance(value, dict):
         raise InvalidSnapshotError(f"{path}: {name} must be a JSON object (a string)")
     return value
+
+
+def _mechanics(path: str | Path, data: Mapping[str, np.ndarray], n: int) -> CellMechanics | None:
+    """The cells' pressure and stress, if the file has them (all three keys or none)."""
+    if not any(name in data for name in MECHANICS_FIELDS):
+        return None
+    _require(path, data, MECHANICS_FIELDS)
+    dimensions = _integer(path, data, "stress_dimensions")
+    pressure, stress = data["pressure"], data["stress"]
+    if dimensions not in (2, 3):
+        raise InvalidSnapshotError(f"{path}: stress_dimensions must be 2 or 3, got {dimensions}")
+    for name, value, shape in (("pressure", pressure, (n,)), ("stress", stress, (n, 3, 3))):
+        if value.shape != shape or value.dtype.kind not in "fiu" or not np.all(np.isfinite(value)):
+            raise InvalidSnapshotError(f"{path}: {name} must be {shape} finite numbers, got {value.dtype} of shape "
+                                       f"{value.shape}")
+    return CellMechanics(pressure.astype(float), stress.astype(float), dimensions == 2)
 
 
 def _checked(path: str | Path, build: Any) -> Any:

@@ -36,6 +36,7 @@ from ..checks import flag, instance, number, real_array
 from ..errors import InvalidArgumentError, InvalidCellsError
 from ..geometry.cells import Cells
 from ..geometry.contacts import Contacts, concatenate, find_contacts, required_velocity_change
+from ..geometry.motion import rotate
 from ..geometry.surfaces import plane_contacts
 from ..resolve import Result, resolve
 from ..solvers import get_solver
@@ -64,22 +65,6 @@ class StepResult:
     contacts: Contacts
     max_overlap: float
     mean_overlap: float
-
-
-def rotate(vectors: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-    """Rotate each (N, 3) vector by its rotation vector (axis × angle [rad]) with Rodrigues'
-    formula, exact for any angle; the results are renormalized to unit length (they are unit up
-    to rounding)."""
-    angle = np.linalg.norm(rotation, axis=1)
-    turning = angle > 0
-    out = np.array(vectors, dtype=float, copy=True)
-    if turning.any():
-        k = rotation[turning] / angle[turning, None]
-        v = out[turning]
-        cos, sin = np.cos(angle[turning])[:, None], np.sin(angle[turning])[:, None]
-        out[turning] = (v * cos + np.cross(k, v) * sin
-                        + k * np.einsum("ij,ij->i", k, v)[:, None] * (1.0 - cos))
-    return out / np.linalg.norm(out, axis=1)[:, None]
 
 
 def advance(cells: Cells, dt: float) -> Cells:
@@ -179,9 +164,10 @@ def step(
 
     The defaults are those of a single contact solve: no margin and no position correction, so
     an overlap that a step leaves (or that the cells start with) is never cleared. A colony run
-    wants both: ``qpcontact simulate`` steps with ``margin=0.3`` [µm], ``position_correction=0.5``
-    and Clarabel at 1e-6; ``step(cells, dt, **Settings().step_options())`` (with
-    :class:`qpcontact.colony.Settings`) does the same in your own loop.
+    wants both: ``qpcontact simulate --step velocity`` steps with ``margin=0.3`` [µm],
+    ``position_correction=0.5`` and Clarabel at 1e-6 (its ``[velocity]`` settings);
+    ``step(cells, dt, **Settings().step_options())`` (with :class:`qpcontact.colony.Settings`)
+    does the same in your own loop.
 
     Args:
         cells: the state at time ``t``.

@@ -3,7 +3,7 @@
 The lowest wing: it imports nothing of qpcontact but :mod:`qpcontact.errors`.
 
 - :mod:`.cells`: :class:`Cells`, N capsules as arrays (positions, shapes, masses, momenta);
-- :mod:`.shapes`: the capsule volume (and mass) and the inertia tensor, one formula each;
+- :mod:`.shapes`: the capsule volume (and mass), footprint and inertia tensor, one formula each;
 - :mod:`.contacts`: :func:`find_contacts` (KD-tree broad phase, vectorized segment narrow
   phase: :func:`select_contacts` then :func:`evaluate_contacts`), :class:`Contacts`,
   :func:`colliding` (the contacts to resolve and their ``b``);
@@ -24,11 +24,11 @@ from .contacts import (
     required_velocity_change,
     select_contacts,
 )
-from .shapes import capsule_mass, capsule_volume, inertia_times
+from .shapes import capsule_footprint, capsule_mass, capsule_volume, inertia_times
 from .surfaces import Plane, channel, evaluate_plane_contacts, plane_contacts, substrate
 
 __all__ = [
-    "Cells", "Contacts", "Plane", "candidate_pairs", "capsule_mass", "capsule_volume", "channel", "evaluate_plane_contacts", "colliding",
+    "Cells", "Contacts", "Plane", "candidate_pairs", "capsule_footprint", "capsule_mass", "capsule_volume", "channel", "evaluate_plane_contacts", "colliding",
     "concatenate", "evaluate_contacts", "find_contacts", "inertia_times", "narrow_phase", "perpendicular_basis",
     "plane_contacts", "relative_normal_velocity", "required_velocity_change", "select_contacts", "substrate",
 ]

@@ -602,3 +602,30 @@ def colliding(
     if keep_separating and mask.any():
         mask[:] = True
     return contacts.subset(mask), b[mask]
+
+
+#: A contact kind fits in this many bits of a key (:func:`contact_keys`).
+KIND_BITS = 3
+#: Cell indices (or ids) of keyed contacts must be below this (:func:`contact_keys`).
+KEY_SPAN_LIMIT = 2**27
+
+
+def contact_keys(a: np.ndarray, b: np.ndarray, kind: np.ndarray, span: int) -> np.ndarray:
+    """(K,) one int64 per contact ``(a, b, kind)``: equal for the same contact, different for
+    different ones, so contacts can be matched across linearizations and steps by sorting.
+    ``key >> KIND_BITS`` identifies the pair (a cell and a plane, for ``b < 0``).
+
+    Args:
+        a: (K,) cells (indices or ids) in ``[0, span)``.
+        b: (K,) cells in ``[0, span)``, or static bodies as negative numbers in ``[−span, 0)``
+            (``−1 − j`` for plane ``j``).
+        kind: (K,) contact kinds (:class:`Contacts`), 0–6.
+        span: one more than the largest cell number (and than the number of static bodies).
+
+    Raises:
+        InvalidArgumentError: ``span`` of :data:`KEY_SPAN_LIMIT` or more (the keys would overflow).
+    """
+    if span >= KEY_SPAN_LIMIT:
+        raise InvalidArgumentError(f"contact keys need cell numbers below {KEY_SPAN_LIMIT}, got up to {span - 1}")
+    pair = np.asarray(a, dtype=np.int64) * (2 * span) + (np.asarray(b, dtype=np.int64) + span)
+    return (pair << KIND_BITS) + np.asarray(kind, dtype=np.int64)

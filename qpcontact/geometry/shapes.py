@@ -1,4 +1,5 @@
-"""The shape of a capsule cell: its volume, and its inertia tensor applied to a vector.
+"""The shape of a capsule cell: its volume, its footprint in a plane, and its inertia tensor
+applied to a vector.
 
 One formula each, used everywhere a volume, a mass from a density, or an angular momentum from
 an angular velocity is needed (growth, simulate, the scenes and the catalogue).
@@ -23,6 +24,12 @@ def capsule_mass(lengths: Any, radii: Any, density: Any = 1.0) -> Any:
 def capsule_volume(lengths: Any, radii: Any) -> Any:
     """Volume of capsules: ``π ρ² l + 4/3 π ρ³`` [length³] (:func:`capsule_mass` at density 1)."""
     return capsule_mass(lengths, radii, 1.0)
+
+
+def capsule_footprint(lengths: Any, radii: Any) -> Any:
+    """Area of a capsule lying in a plane, seen from above (a monolayer cell's footprint):
+    ``2ρ l + π ρ²`` [length²] (a rectangle and two half discs). Arrays broadcast."""
+    return 2.0 * radii * lengths + np.pi * radii**2
 
 
 def inertia_times(axes: np.ndarray, lengths: np.ndarray, radii: np.ndarray, masses: np.ndarray,

@@ -2,7 +2,7 @@
 
 - :mod:`.resolve`: :func:`resolve` (find the colliding contacts, assemble, solve through the
   solver registry, check, return a :class:`Result`), :func:`solve_system` (solve an assembled
-  system and apply the acceptance checks);
+  system and apply the acceptance checks: a :class:`SystemSolution`);
 - :mod:`.metrics`: the dimensionless error measures of model.md;
 - :mod:`.validation`: high-accuracy references (:func:`reference_solution`) and the comparison
   with the plain solve (:func:`compare_with_linear`).
@@ -17,6 +17,7 @@ from .resolve import (
     ACCEPT_CAP,
     ACCEPT_FACTOR,
     Result,
+    SystemSolution,
     acceptance_failure,
     acceptance_limit,
     certified,
@@ -35,7 +36,7 @@ from .validation import (
 )
 
 __all__ = [
-    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Reference", "Result", "UnverifiedReferenceWarning",
-    "acceptance_failure", "acceptance_limit", "active_set_polish", "certified", "compare_with_linear", "metrics",
-    "reference", "reference_solution", "resolve", "solve_system",
+    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Reference", "Result", "SystemSolution",
+    "UnverifiedReferenceWarning", "acceptance_failure", "acceptance_limit", "active_set_polish", "certified",
+    "compare_with_linear", "metrics", "reference", "reference_solution", "resolve", "solve_system",
 ]

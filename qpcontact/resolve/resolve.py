@@ -165,6 +165,38 @@ def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, l
     return ""
 
 
+@dataclass
+class SystemSolution:
+    """The outcome of one :func:`solve_system`: the answer and what the solve did.
+
+    Attributes:
+        y: the scaled unknowns ``ỹ`` (None if the solver returned no answer).
+        lam: the scaled contact impulses ``λ̃`` with ``ỹ = B̃ᵀλ̃`` (None where the solver gives none).
+        converged: the answer passed the acceptance checks and the solver reported success (or,
+            for a formulation they certify, :func:`certified`, whatever its status word).
+        status: the solver's own status text (``"... (again at T)"`` after the retry).
+        iterations: solver iterations where known.
+        setup_seconds, solve_seconds: time in the solver's setup and solve [s] (both attempts).
+        message: why the answer is not accepted ("" if it is).
+        formulation, form: what was solved and how (after :meth:`SolverSpec.plan`).
+        condition_estimate: ``cond₁`` of the scaled Delassus operator, when asked for.
+        extras: what the solver reported besides (e.g. ``blocks``, ``residual``).
+    """
+
+    y: np.ndarray | None
+    lam: np.ndarray | None
+    converged: bool
+    status: str
+    iterations: int | None
+    setup_seconds: float
+    solve_seconds: float
+    message: str
+    formulation: str
+    form: str
+    condition_estimate: float | None = None
+    extras: dict[str, Any] = field(default_factory=dict)
+
+
 def certified(formulation: str) -> bool:
     """Whether :func:`acceptance_failure` certifies an answer of this formulation by itself, so
     that it is accepted whatever the solver's status word: complementarity, whose checks are its
@@ -185,17 +217,19 @@ def solve_system(
     regularization: float = 0.0,
     solver_settings: dict[str, Any] | None = None,
     estimate_condition: bool = False,
-) -> tuple[np.ndarray | None, np.ndarray | None, dict[str, Any]]:
+) -> SystemSolution:
     """Solve an assembled system with a registered solver and check the answer
     (:func:`acceptance_failure`); an answer the solver does not call converged is accepted when
     the checks certify it (:func:`certified`: complementarity), whatever the status word;
     an answer the solver calls converged but that fails the checks
     is solved for once more at ``RETRY_FACTOR·tolerance`` (within what is left of
-    ``time_limit``) and kept if it passes them at ``tolerance``. Returns ``(ỹ, λ̃, info)``; ``info`` has ``converged``,
-    ``status``, ``iterations``, ``setup``, ``solve``, ``message``, ``condition_estimate``,
-    ``formulation`` and ``form`` (what was solved) and ``extras`` (what the solver reported
-    besides). Used by :func:`resolve` and by the studies (which assemble once and solve many
-    times)."""
+    ``time_limit``) and kept if it passes them at ``tolerance``. Used by :func:`resolve` and by
+    the studies (which assemble once and solve many times).
+
+    Returns:
+        A :class:`SystemSolution` (never raises for a failure to solve: ``converged`` is False
+        and ``message`` says why).
+    """
     spec = get_solver(solver)
     formulation, form = spec.plan(formulation, form)
     settings = mapping("solver_settings", solver_settings)
@@ -207,11 +241,10 @@ def solve_system(
     problem = Problem.of(system, regularization)
     start = time.perf_counter()
     out = solve(problem, solver, formulation, form, tolerance=tolerance, time_limit=time_limit, settings=settings)
-    info: dict[str, Any] = {"formulation": formulation, "form": form, "condition_estimate": None, "message": "",
-                            "status": out.status, "iterations": out.iterations, "setup": out.setup_seconds,
-                            "solve": out.solve_seconds, "extras": out.extras}
+    status, iterations, extras = out.status, out.iterations, out.extras
+    setup, solve_seconds = out.setup_seconds, out.solve_seconds
     if out.y is None:
-        info.update(converged=False, message=out.error or f"{solver} returned no solution (status {out.status})")
+        failure = out.error or f"{solver} returned no solution (status {out.status})"
     elif not out.found:
         # The status word is the backend's own stopping test, not the promise: an answer whose
         # residuals certify it (the KKT conditions of complementarity) is accepted whatever the
@@ -221,9 +254,9 @@ def solve_system(
         failure = acceptance_failure(system, formulation, out.y, out.lam, tolerance) if certified(formulation) else (
             "its formulation's checks do not certify an answer")
         if failure:
-            info.update(converged=False, message=f"{solver} did not converge (status {out.status}); {failure}")
+            failure = f"{solver} did not converge (status {out.status}); {failure}"
         else:
-            info.update(converged=True, status=f"{out.status} (accepted by its residuals)")
+            status = f"{out.status} (accepted by its residuals)"
     else:
         failure = acceptance_failure(system, formulation, out.y, out.lam, tolerance)
         left = None if time_limit is None else time_limit - (time.perf_counter() - start)
@@ -234,17 +267,19 @@ def solve_system(
             # asked for (a grown 2D colony, 7,000 contacts: Clarabel's residual 1.04e-4 at 1e-6,
             # 1e-6 at 1e-7, for 0.35 s more; OSQP's 2.3e-4, then 5.7e-5).
             again = solve(problem, solver, formulation, form, tolerance=tighter, time_limit=left, settings=settings)
-            info.update(setup=info["setup"] + again.setup_seconds, solve=info["solve"] + again.solve_seconds)
+            setup, solve_seconds = setup + again.setup_seconds, solve_seconds + again.solve_seconds
             if again.y is not None and again.found and not acceptance_failure(system, formulation, again.y, again.lam,
                                                                                  tolerance):
                 out, failure = again, ""
-                info.update(status=f"{again.status} (again at {tighter:g})", iterations=again.iterations,
-                            extras=again.extras)
-        info.update(converged=not failure, message=f"{solver} reported success but {failure}" if failure else "")
+                status, iterations, extras = f"{again.status} (again at {tighter:g})", again.iterations, again.extras
+        if failure:
+            failure = f"{solver} reported success but {failure}"
+    condition = None
     if estimate_condition:
-        info["condition_estimate"] = (out.extras.get("condition_estimate") if own_estimate else solve_min_norm(
+        condition = (out.extras.get("condition_estimate") if own_estimate else solve_min_norm(
             system.matrix, system.rhs, method="auto", estimate_condition=True).condition_estimate)
-    return out.y, out.lam, info
+    return SystemSolution(out.y, out.lam, not failure, status, iterations, setup, solve_seconds, failure, formulation,
+                          form, condition, extras)
 
 
 def resolve(
@@ -352,9 +387,10 @@ def resolve(
                        "total": time.perf_counter() - t_start}, {"penetration": 0.0}, 0, bool(planar))
     system = build_system(cells, active, b, reduce=reduce, planar=planar, scale=scale)
     t_assemble = time.perf_counter()
-    y, lam, info = solve_system(system, solver=solver, formulation=formulation, form=form, tolerance=tolerance,
-                                time_limit=time_limit, regularization=regularization, solver_settings=solver_settings,
-                                estimate_condition=estimate_condition)
+    solution = solve_system(system, solver=solver, formulation=formulation, form=form, tolerance=tolerance,
+                            time_limit=time_limit, regularization=regularization, solver_settings=solver_settings,
+                            estimate_condition=estimate_condition)
+    y, lam = solution.y, solution.lam
     t_solve = time.perf_counter()
     errors: dict[str, float] = {}
     impulses = np.zeros((n_cells, 7))
@@ -370,7 +406,7 @@ def resolve(
                 errors["duality_gap"] = metrics.duality_gap(system, y, lam)
         errors.update(metrics.physics(cells, system, impulses, contact_impulses))
     t_check = time.perf_counter()
-    converged = bool(info["converged"])
+    converged = solution.converged
     result = Result(
         impulses=impulses,
         # Unconverged: a copy of the caller's cells, never the object itself (issue 19).
@@ -381,18 +417,18 @@ def resolve(
         formulation=solved,
         form=solved_form,
         converged=converged,
-        status=info["status"],
-        iterations=info["iterations"],
-        times={"detect": t_detect - t_start, "assemble": t_assemble - t_detect, "setup": info["setup"],
-               "solve": info["solve"], "check": t_check - t_solve, "total": t_check - t_start},
+        status=solution.status,
+        iterations=solution.iterations,
+        times={"detect": t_detect - t_start, "assemble": t_assemble - t_detect, "setup": solution.setup_seconds,
+               "solve": solution.solve_seconds, "check": t_check - t_solve, "total": t_check - t_start},
         errors=errors,
         n_unknowns=system.shape[1],
         planar=system.planar,
-        condition_estimate=info["condition_estimate"],
-        message=info["message"],
+        condition_estimate=solution.condition_estimate,
+        message=solution.message,
         system=system,
         scaled_solution=y,
     )
     if not converged and on_failure == "raise":
-        raise SolverFailedError(f"{solver}/{formulation}: {info['message']}", result)
+        raise SolverFailedError(f"{solver}/{formulation}: {solution.message}", result)
     return result

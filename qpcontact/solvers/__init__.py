@@ -2,11 +2,13 @@
 
 Every solver is one module here that registers a
 :class:`~qpcontact.solvers.registry.SolverSpec` at import; the imports below register them, in
-the order the listings show them: the plain solve (:mod:`.linear`), the study baselines
-(:mod:`.baselines`: ``cg``, ``cg_euclidean``, ``bbpgd``), the built-in matrix-free QP solver
-(:mod:`.mprgp`), the built-in interior-point solver that takes bounds (:mod:`.ipm`) and every qpsolvers backend (:mod:`.qpsolvers_bridge`). Everything that picks
-a solver asks the registry: :func:`solve` (the one dispatch), :func:`get_solver`,
-:func:`available_solvers`.
+the order the listings show them: the plain solve (:mod:`.linear`), the built-in matrix-free QP
+solver (:mod:`.mprgp`), the built-in interior-point solver that takes bounds (:mod:`.ipm`) and
+every qpsolvers backend (:mod:`.qpsolvers_bridge`). The study baselines (:mod:`.baselines`:
+``cg``, ``cg_euclidean``, ``bbpgd``) are registered when a study asks for them
+(:func:`~qpcontact.solvers.registry.load_baselines`: ``available_solvers(include_baselines=True)``
+or ``get_solver("cg")``), not by ``import qpcontact``. Everything that picks a solver asks the
+registry: :func:`solve` (the one dispatch), :func:`get_solver`, :func:`available_solvers`.
 
 Adding a solver
 ---------------
@@ -32,7 +34,6 @@ example.
 # The order of these imports is the order of the listings (available_solvers, demo, compare).
 # isort: off
 from . import linear  # noqa: F401  (registers "linear")
-from . import baselines  # noqa: F401  (registers "cg", "cg_euclidean", "bbpgd")
 from . import mprgp  # noqa: F401  (registers "mprgp")
 from . import ipm  # noqa: F401  (registers "ipm")
 from . import qpsolvers_bridge  # noqa: F401  (registers every qpsolvers backend)
@@ -51,6 +52,7 @@ from .registry import (
     SolverSpec,
     available_solvers,
     get_solver,
+    load_baselines,
     register,
     registered_solvers,
     solve,
@@ -60,5 +62,5 @@ from .registry import (
 __all__ = [
     "BLOCK_ROWS", "DEFAULT_FORM", "FORMS", "FORMULATIONS", "IterativeSolution", "LinearSolution", "Problem", "QP_FORMS",
     "QP_FORMULATIONS", "SolverOutput", "SolverSpec", "available_solvers", "get_solver", "independent_blocks",
-    "register", "registered_solvers", "solve", "solve_min_norm", "unregister",
+    "load_baselines", "register", "registered_solvers", "solve", "solve_min_norm", "unregister",
 ]

@@ -5,22 +5,27 @@
 the solver of the position-level colony step (:mod:`qpcontact.colony.position`), which bounds the
 turning and the shrinking of each cell per step. Why an interior-point method: the contact graph
 of a grown, jammed colony is nearly isostatic, so many active contacts are redundant and their
-impulses are not unique. Active-set and semismooth Newton methods (PDAS, projected Newton,
-Fischer–Burmeister Newton) cycled or stalled on those problems (docs/performance.md, "Position-level
-step"); an interior-point method is indifferent to redundancy and needs 10–25 factorizations
-whatever the colony.
+impulses are not unique, and about 8 % of the contacts change between pushing and not pushing
+from one step to the next. Active-set and semismooth Newton methods (PDAS, projected Newton,
+Fischer–Burmeister Newton, a semismooth augmented Lagrangian warm-started from the last step),
+first-order methods (ADMM with one factorization, projected Gauss–Seidel, MPRGP) and warm starts
+of this method from the last step all cost more on those problems (docs/model-notes.md, "A step
+that scales"); an interior-point method is indifferent to redundancy and needs 10–20
+factorizations whatever the colony.
 
-Each iteration solves one linear system in the contact impulses, the normal equations of the
-Newton step (Mehrotra predictor–corrector, both directions from one factorization)::
+Each iteration solves one linear system in the unknowns ỹ, the normal equations of the Newton
+step (Mehrotra predictor–corrector, both directions from one factorization)::
 
-    (B̃ diag(w) B̃ᵀ + diag(s/λ)) Δλ = r,     w = 1/(1 + α/p + β/q)   (bounded columns),
+    (I + diag(α/p + β/q) + B̃ᵀ diag(λ/s) B̃) Δỹ = r,
 
 with ``s = B̃ỹ − b̃`` the contact slacks, ``λ`` their impulses and ``α, β`` (``p, q``) the bound
-multipliers (slacks). The matrix keeps the sparsity pattern of ``B̃B̃ᵀ`` plus its diagonal: the
-pattern (and the symbolic analysis of the sparse Cholesky factorization: CHOLMOD, supernodal,
-bundled with cvxopt) is computed once per problem, and each iteration only refills the values
-(:class:`NormalMatrix`). Supernodal matters: on the 10⁴-cell colony of the benchmark a numeric
-factorization takes 0.05 s against 0.27 s for the simplicial LDLᵀ of qdldl (docs/performance.md).
+multipliers (slacks). The matrix has the sparsity of ``I + B̃ᵀB̃``: a cell's unknowns coupled with
+those of the cells it touches, smaller than the contacts' own normal matrix ``B̃B̃ᵀ`` (the one
+this solver factorized until 2026-12; 3× cheaper to factorize on a grown 3D biofilm, where a
+cell has 11 contacts and 6 unknowns). The pattern, its nested-dissection ordering and CHOLMOD's
+symbolic analysis are computed once per problem (:class:`~qpcontact.solvers.cholesky.GramMatrix`),
+and reused by the next problem with the same pattern (the next linearization of a position step
+with the same contacts); each iteration refills the values and factorizes.
 
 Stopping (all in the scaled units of :mod:`qpcontact.assembly.system`, ``max b̃ = 1``): the
 largest of the penetration ``max(0, b̃ − B̃ỹ)``, the bound violation, the stationarity residual
@@ -40,12 +45,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import cvxopt
 import numpy as np
 import scipy.sparse as sp
-from cvxopt import cholmod
 
 from ..errors import InvalidArgumentError
+from .cholesky import GramMatrix
 from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
 
 #: Default cap on interior-point iterations.
@@ -56,102 +60,19 @@ MAX_ITERATIONS = 100
 STALL_ITERATIONS = 10
 #: Centrality correctors per iteration (Gondzio): each is one more solve with the same factorization.
 CORRECTORS = 1
+#: Iterative refinement steps of each Newton direction (one more solve each, no factorization).
+REFINEMENTS = 3
+#: The smallest contact compliance ``ρ`` of the Newton systems (``s + ρλ`` for ``s``), in the
+#: scaled units: it bounds the weights ``λ/s`` of the normal matrix in the unknowns by ``1/ρ``.
+REGULARIZATION = 1e-10
+#: ``ρ`` of the normal equations in the contact impulses, relative to :data:`REGULARIZATION`.
+CONTACTS_REGULARIZATION = 1e-4
+#: Below this error the normal equations in the unknowns lose the dual equation to rounding
+#: (measured: stalls at 10⁻⁷–5·10⁻⁵ on grown colonies); a solve asked for more continues in
+#: the contact impulses (:class:`_InContacts`).
+UNKNOWNS_ACCURACY = 1e-4
 #: Fraction of the way to the boundary an iterate may go (keeps it interior).
 STEP_FRACTION = 0.995
-
-
-class NormalMatrix:
-    """``B̃ diag(w) B̃ᵀ + diag(d)`` for a fixed sparsity pattern of ``B̃`` and changing ``w > 0``,
-    ``d > 0``: the lower triangle in CSC with a fixed pattern, refilled by one ``np.bincount``
-    per call, and its sparse Cholesky factorization (CHOLMOD, supernodal, through cvxopt; the
-    symbolic analysis and fill-reducing ordering are done once per pattern).
-
-    Every product ``B̃_ic B̃_jc`` (``i ≥ j``, same column ``c``) is listed once at construction
-    with the position of entry ``(i, j)`` in the pattern, so a refill is a weighted sum over that
-    list (memory: 24 bytes per product; a 2D colony has about 35 products per contact). A matrix
-    with the same pattern and other values (the next linearization of a position-level step, with
-    the same contacts) reuses all of it through :meth:`refresh`."""
-
-    def __init__(self, matrix: sp.spmatrix) -> None:
-        csc = sp.csc_matrix(matrix)
-        csc.sum_duplicates()
-        csc.sort_indices()
-        k, n = csc.shape
-        counts = np.diff(csc.indptr)
-        # The pairs (i ≥ j) of each column, generated for all columns with the same number of
-        # entries at once (a few distinct counts: a loop over counts, not over columns).
-        firsts, seconds, columns = [], [], []
-        for m in np.unique(counts[counts > 0]):
-            cols = np.flatnonzero(counts == m)
-            i, j = np.tril_indices(int(m))
-            start = csc.indptr[cols][:, None]
-            firsts.append((start + i).ravel())
-            seconds.append((start + j).ravel())
-            columns.append(np.repeat(cols, i.size))
-        first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
-        second = np.concatenate(seconds) if seconds else np.zeros(0, dtype=np.int64)
-        row_i, row_j = csc.indices[first], csc.indices[second]  # sorted rows: row_i ≥ row_j
-        self.first, self.second = first.astype(np.int32), second.astype(np.int32)
-        self.column = (np.concatenate(columns) if columns else np.zeros(0, dtype=np.int64)).astype(np.int32)
-        # The pattern (with the whole diagonal) from scipy's sparse product, in CSC order; each
-        # product's place in it by a binary search of its (column, row) key.
-        pattern = sp.tril(abs(csc) @ abs(csc).T + sp.identity(k, format="csc"), format="csc")
-        pattern.sort_indices()
-        keys = np.repeat(np.arange(k, dtype=np.int64), np.diff(pattern.indptr)) * k + pattern.indices
-        self.position = np.searchsorted(keys, row_j.astype(np.int64) * k + row_i).astype(np.int32)
-        self.diagonal_position = np.searchsorted(keys, np.arange(k, dtype=np.int64) * (k + 1))
-        self.size = keys.size
-        self.shape = (k, k)
-        self._indptr, self._indices = csc.indptr.copy(), csc.indices.copy()
-        self.product = csc.data[self.first] * csc.data[self.second]
-        self._rows = pattern.indices.tolist()
-        self._cols = (keys // k).tolist()
-        self._matrix: Any = None
-        self._symbolic: Any = None
-
-    def refresh(self, matrix: sp.spmatrix) -> bool:
-        """Take the values of ``matrix`` if it has the pattern this was built for (then the
-        symbolic factorization is reused). Returns whether it did."""
-        csc = sp.csc_matrix(matrix)
-        if csc.shape[0] != self.shape[0] or not (np.array_equal(csc.indptr, self._indptr)
-                                                 and np.array_equal(csc.indices, self._indices)):
-            return False
-        self.product = csc.data[self.first] * csc.data[self.second]
-        return True
-
-    def values(self, w: np.ndarray, d: np.ndarray) -> np.ndarray:
-        """The stored (lower-triangle, CSC-ordered) values for these weights."""
-        data = np.bincount(self.position, weights=self.product * w[self.column], minlength=self.size)
-        data[self.diagonal_position] += d
-        return data
-
-    def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize for these weights; returns a function ``v ↦ M⁻¹v``.
-
-        Raises:
-            ArithmeticError: the matrix is not numerically positive definite (CHOLMOD's error).
-        """
-        data = cvxopt.matrix(self.values(w, d))
-        if self._matrix is None:
-            self._matrix = cvxopt.spmatrix(data, self._rows, self._cols, self.shape)
-            saved = dict(cholmod.options)
-            cholmod.options["supernodal"] = 2  # supernodal: dense BLAS kernels (5x qdldl at 10^4 cells)
-            try:
-                self._symbolic = cholmod.symbolic(self._matrix, uplo="L")
-            finally:
-                cholmod.options.clear()
-                cholmod.options.update(saved)
-        else:
-            self._matrix.V = data
-        cholmod.numeric(self._matrix, self._symbolic)
-        factor = self._symbolic
-
-        def solve(v: np.ndarray) -> np.ndarray:
-            x = cvxopt.matrix(np.asarray(v, dtype=float))
-            cholmod.solve(factor, x)
-            return np.asarray(x).ravel()
-
-        return solve
 
 
 def _max_step(value: np.ndarray, change: np.ndarray) -> float:
@@ -183,32 +104,28 @@ class _Iterate:
 
 
 class _Newton:
-    """The Newton system of one iteration, factorized once, solved for several targets."""
+    """The Newton system of one iteration, factorized once, solved for several targets: the
+    residuals, the step lengths and the complementarity, whatever the space of the linear
+    system (:class:`_InUnknowns`, :class:`_InContacts`)."""
 
     def __init__(self, B: sp.csr_matrix, Bt: sp.csr_matrix, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                 has_lo: np.ndarray, has_hi: np.ndarray, x: _Iterate, solve: Callable[[np.ndarray], np.ndarray],
-                 w: np.ndarray) -> None:
-        self.B, self.Bt, self.x, self.solve, self.w = B, Bt, x, solve, w
+                 has_lo: np.ndarray, has_hi: np.ndarray, x: _Iterate, regularization: float) -> None:
+        self.B, self.Bt, self.x, self.regularization = B, Bt, x, regularization
         self.has_lo, self.has_hi = has_lo, has_hi
         self.r_dual = x.y - Bt @ x.lam - x.alpha + x.beta
         self.r_primal = B @ x.y - b - x.s
         self.r_lower = np.where(has_lo, x.y - lo - x.p, 0.0)
         self.r_upper = np.where(has_hi, hi - x.y - x.q, 0.0)
+        self.solve: Callable[[np.ndarray], np.ndarray] = lambda v: v
+
+    def factor(self, matrix: GramMatrix) -> None:
+        """Factorize this iteration's system (raises ArithmeticError, CHOLMOD's)."""
+        raise NotImplementedError
 
     def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
         """Newton direction for complementarity targets ``λs → target_c``, ``αp → target_l``,
         ``βq → target_u`` (the primal, dual and bound residuals are driven to zero too)."""
-        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
-        t_l = target_l - x.alpha * self.r_lower
-        t_u = target_u - x.beta * self.r_upper
-        h = -self.r_dual + np.where(has_lo, t_l / x.p, 0.0) - np.where(has_hi, t_u / x.q, 0.0)
-        d_lam = self.solve(-self.r_primal + target_c / x.lam - self.B @ (self.w * h))
-        d_y = self.w * (h + self.Bt @ d_lam)
-        return _Iterate(
-            y=d_y, s=(target_c - x.s * d_lam) / x.lam, lam=d_lam,
-            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
-            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / x.p, 0.0),
-            beta=np.where(has_hi, (t_u + x.beta * d_y) / x.q, 0.0))
+        raise NotImplementedError
 
     def lengths(self, d: _Iterate) -> tuple[float, float]:
         """Largest primal and dual step lengths (≤ 1) that keep slacks and multipliers ≥ 0."""
@@ -223,6 +140,63 @@ class _Newton:
         lo, hi = self.has_lo, self.has_hi
         total = x.lam @ x.s + x.alpha[lo] @ x.p[lo] + x.beta[hi] @ x.q[hi]
         return float(total) / max(x.lam.size + int(lo.sum()) + int(hi.sum()), 1)
+
+
+class _InUnknowns(_Newton):
+    """The Newton system as normal equations in the unknowns (module docstring): eliminated
+    ``Δs = B̃Δỹ + r_p``, ``Δλ = (target_c − λΔs)/s``, ``Δα = (t_l − αΔỹ)/p``,
+    ``Δβ = (t_u + βΔỹ)/q``; what is left is the dual equation. ``s``, ``p`` and ``q`` are
+    regularized (``s + ρλ``: a tiny contact compliance) alike in the matrix and in the
+    elimination, so the dual equation holds up to the rounding of ``Δλ``, which is recovered
+    from Δỹ through the weight λ/s. That weight grows without bound as the method converges, so
+    below :data:`UNKNOWNS_ACCURACY` the method continues in :class:`_InContacts`."""
+
+    def factor(self, matrix: GramMatrix) -> None:
+        x, rho = self.x, self.regularization
+        self.slack, self.p, self.q = x.s + rho * x.lam, x.p + rho * x.alpha, x.q + rho * x.beta
+        diagonal = 1.0 + np.where(self.has_lo, x.alpha / self.p, 0.0) + np.where(self.has_hi, x.beta / self.q, 0.0)
+        self.solve = matrix.factor(x.lam / self.slack, diagonal)
+
+    def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
+        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
+        t_l = target_l - x.alpha * self.r_lower
+        t_u = target_u - x.beta * self.r_upper
+        h = -self.r_dual + np.where(has_lo, t_l / self.p, 0.0) - np.where(has_hi, t_u / self.q, 0.0)
+        d_y = self.solve(h + self.Bt @ ((target_c - x.lam * self.r_primal) / self.slack))
+        d_s = self.B @ d_y + self.r_primal
+        return _Iterate(
+            y=d_y, s=d_s, lam=(target_c - x.lam * d_s) / self.slack,
+            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
+            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / self.p, 0.0),
+            beta=np.where(has_hi, (t_u + x.beta * d_y) / self.q, 0.0))
+
+
+class _InContacts(_Newton):
+    """The Newton system as normal equations in the contact impulses,
+    ``(B̃ diag(w) B̃ᵀ + diag(s/λ + ρ)) Δλ = r`` with ``w = 1/(1 + α/p + β/q)``: Δỹ is recovered
+    from Δλ through ``w ≤ 1``, so rounding stays small however far the method converges; the
+    matrix is larger than in the unknowns (a contact for each row and column) and costlier to
+    factorize (3× on a grown 3D biofilm), so only the last iterations of a tight solve use it."""
+
+    def factor(self, matrix: GramMatrix) -> None:
+        x = self.x
+        self.w = 1.0 / (1.0 + np.where(self.has_lo, x.alpha / x.p, 0.0) + np.where(self.has_hi, x.beta / x.q, 0.0))
+        # Its own regularization is far smaller: rounding is no issue here (a pivot lost to it
+        # raises, and the loop regularizes more).
+        self.solve = matrix.factor(self.w, x.s / x.lam + self.regularization * CONTACTS_REGULARIZATION)
+
+    def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
+        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
+        t_l = target_l - x.alpha * self.r_lower
+        t_u = target_u - x.beta * self.r_upper
+        h = -self.r_dual + np.where(has_lo, t_l / x.p, 0.0) - np.where(has_hi, t_u / x.q, 0.0)
+        d_lam = self.solve(-self.r_primal + target_c / x.lam - self.B @ (self.w * h))
+        d_y = self.w * (h + self.Bt @ d_lam)
+        return _Iterate(
+            y=d_y, s=(target_c - x.s * d_lam) / x.lam, lam=d_lam,
+            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
+            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / x.p, 0.0),
+            beta=np.where(has_hi, (t_u + x.beta * d_y) / x.q, 0.0))
 
 
 def interior_point(
@@ -268,7 +242,8 @@ def interior_point(
     if np.any(lo > hi):
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
     cap = max_iterations or MAX_ITERATIONS
-    normal = _normal_matrix(B)
+    normal = _gram_matrix(B)
+    contact_matrix: GramMatrix | None = None
 
     # Start (Mehrotra's heuristic): the least-squares impulses of (B̃B̃ᵀ + I)λ = b̃, ỹ = B̃ᵀλ moved
     # inside the bounds (a hundredth of the interval), then impulses and slacks shifted to be
@@ -277,7 +252,8 @@ def interior_point(
     # Newton equations. Bound slacks start at the distance to the bound.
     margin = np.where(has_lo & has_hi, 0.01 * (hi - lo), 0.01)
     if initial is None:
-        lam0 = normal.factor(np.ones(n), np.ones(k))(b)
+        # (B̃B̃ᵀ + I)⁻¹b̃ = b̃ − B̃(I + B̃ᵀB̃)⁻¹B̃ᵀb̃ (Woodbury), with the factorization of the unknowns
+        lam0 = b - B @ normal.factor(np.ones(k), np.ones(n))(Bt @ b)
         y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
         s0 = B @ y - b
         lam0 = lam0 + max(-1.5 * float(lam0.min(initial=0.0)), 0.0)
@@ -295,7 +271,7 @@ def interior_point(
                  p=np.where(has_lo, np.maximum(y - lo, margin), 1.0), q=np.where(has_hi, np.maximum(hi - y, margin), 1.0),
                  alpha=has_lo.astype(float), beta=has_hi.astype(float))
     best_error, best, best_iteration = np.inf, x, 0
-    status, iteration, regularization = "max_iterations", 0, 1e-14
+    status, iteration, regularization = "max_iterations", 0, REGULARIZATION
     for iteration in range(cap + 1):
         error = _error(x, B @ x.y - b, lo, hi, has_lo, has_hi, x.y - Bt @ x.lam - x.alpha + x.beta)
         if error < best_error:
@@ -311,16 +287,22 @@ def interior_point(
         if time_limit is not None and time.perf_counter() - start > time_limit:
             status = "time_limit"
             break
-        w = 1.0 / (1.0 + np.where(has_lo, x.alpha / x.p, 0.0) + np.where(has_hi, x.beta / x.q, 0.0))
-        solve = None
-        while solve is None:
+        # Normal equations in the unknowns (the smaller and cheaper system) until the last
+        # iterations of a tight solve, which need the stability of the contacts' (_InUnknowns).
+        in_contacts = error <= UNKNOWNS_ACCURACY and tolerance < UNKNOWNS_ACCURACY
+        newton: _Newton = (_InContacts if in_contacts else _InUnknowns)(B, Bt, b, lo, hi, has_lo, has_hi, x,
+                                                                          regularization)
+        if in_contacts and contact_matrix is None:
+            contact_matrix = GramMatrix(Bt)
+        while True:
             try:
-                solve = normal.factor(w, x.s / x.lam + regularization)
-            except ArithmeticError:  # a pivot lost to rounding: regularize more (a tiny contact compliance)
+                newton.factor(contact_matrix if in_contacts and contact_matrix is not None else normal)
+                break
+            except ArithmeticError:  # a pivot lost to rounding: regularize more
                 regularization *= 100.0
                 if regularization > 1e-4:
                     return _result(best, best_error, iteration, "breakdown", start)
-        newton = _Newton(B, Bt, b, lo, hi, has_lo, has_hi, x, solve, w)
+                newton.regularization = regularization
         mu = newton.complementarity()
         affine = newton.direction(-x.lam * x.s, -x.alpha * x.p, -x.beta * x.q)
         sigma = min(1.0, (newton.complementarity(affine, *newton.lengths(affine)) / mu) ** 3) if mu > 0 else 0.0
@@ -369,15 +351,15 @@ def _result(best: _Iterate, error: float, iteration: int, status: str, start: fl
                              time.perf_counter() - start)
 
 
-#: The normal matrix of the last problem: the next one reuses it (and its symbolic factorization)
-#: when its matrix has the same pattern (the linearizations of one position-level step).
-_LAST: list[NormalMatrix] = []
+#: The normal matrix of the last problem: the next one reuses it (its ordering and symbolic
+#: factorization) when its matrix has the same pattern (the linearizations of one position step).
+_LAST: list[GramMatrix] = []
 
 
-def _normal_matrix(matrix: sp.csr_matrix) -> NormalMatrix:
+def _gram_matrix(matrix: sp.csr_matrix) -> GramMatrix:
     if _LAST and _LAST[0].refresh(matrix):
         return _LAST[0]
-    _LAST[:] = [NormalMatrix(matrix)]
+    _LAST[:] = [GramMatrix(matrix)]
     return _LAST[0]
 
 
@@ -390,6 +372,7 @@ def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, t
 
 register(SolverSpec(
     "ipm", formulations=("complementarity",), forms=("contact",), warm_start=False, time_limit=True, solve=_solve,
-    description="built-in primal-dual interior point (sparse LDLᵀ of the contact normal equations), takes bounds on ỹ",
+    description="built-in primal-dual interior point (sparse Cholesky of the normal equations in the unknowns), "
+                "takes bounds on ỹ",
     settings=("max_iterations",), blockwise=True, bounds=("contact",), bundled=True,
 ))

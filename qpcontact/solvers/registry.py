@@ -25,6 +25,7 @@ through ``Ã = B̃B̃ᵀ``) and ``"normal_equations"`` (``B̃ᵀB̃ỹ = B̃ᵀb
 
 from __future__ import annotations
 
+import importlib
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -324,12 +325,26 @@ def registered_solvers() -> list[str]:
     return list(_SOLVERS)
 
 
+#: The module of the study baselines (``cg``, ``cg_euclidean``, ``bbpgd``): imported, and so
+#: registered, only when a study asks for them (:func:`load_baselines`), not by ``import qpcontact``.
+BASELINES_MODULE = "qpcontact.solvers.baselines"
+
+
+def load_baselines() -> None:
+    """Register the study baselines (:data:`BASELINES_MODULE`; once, on first use)."""
+    importlib.import_module(BASELINES_MODULE)
+
+
 def available_solvers(*, include_baselines: bool = False) -> list[str]:
     """The solver names usable here, in registration order: the plain solve ``"linear"``, the
-    built-in ``"mprgp"``, then every installed qpsolvers backend (sorted), then solvers
-    registered later. ``include_baselines`` adds the baselines the studies compare against
-    (``cg``, ``cg_euclidean``, ``bbpgd``)."""
-    return [name for name, spec in _SOLVERS.items() if (include_baselines or not spec.baseline) and spec.available()]
+    built-in ``"mprgp"`` and ``"ipm"``, then every installed qpsolvers backend (sorted), then
+    solvers registered later. ``include_baselines`` adds, at the end, the baselines the studies
+    compare against (``cg``, ``cg_euclidean``, ``bbpgd``; loaded now if they were not)."""
+    if include_baselines:
+        load_baselines()
+    usable = [name for name, spec in _SOLVERS.items() if spec.available()]
+    return ([name for name in usable if not _SOLVERS[name].baseline]
+            + ([name for name in usable if _SOLVERS[name].baseline] if include_baselines else []))
 
 
 def get_solver(name: str) -> SolverSpec:
@@ -339,6 +354,8 @@ def get_solver(name: str) -> SolverSpec:
         UnknownSolverError: no solver of that name is registered.
         SolverNotInstalledError: it is registered but cannot run here.
     """
+    if isinstance(name, str) and name not in _SOLVERS:
+        load_baselines()  # a baseline asked for by name
     spec = _SOLVERS.get(name) if isinstance(name, str) else None
     if spec is None:
         raise UnknownSolverError(f"unknown solver {name!r}; installed: {available_solvers()}")

@@ -150,9 +150,10 @@ def run_snapshot(dimensions: int, n_cells: int, *, seed: int, repeats: int, solv
 
         def call(name: str = name, form: str = form, tol: float = tol):
             return solve_system(system, solver=name, form=form, tolerance=tol, time_limit=time_limit)
-        (y, lam, info), times = _timed(call, repeats)
-        row.update(converged=bool(info["converged"]), status=str(info["status"]), iterations=info["iterations"],
-                   form=info["form"], message=info["message"])
+        solution, times = _timed(call, repeats)
+        y, lam = solution.y, solution.lam
+        row.update(converged=solution.converged, status=solution.status, iterations=solution.iterations,
+                   form=solution.form, message=solution.message)
         if not get_solver(name).plain and y is not None and lam is not None:
             guesses[spec] = lam
             (_, t_check) = _timed(partial(_measures, cells, system, y, lam), 1)

@@ -25,7 +25,7 @@ within ``ACCURACY_FACTOR·tolerance`` of the reference; a run that says it conve
 that close is counted as *reported success, inaccurate*. Each run is made in a child process
 with a hard time-out (:func:`qpcontact.studies.harness.guarded`), so a backend without a time
 limit of its own (or one that crashes) cannot stop the comparison. With ``--scheduler ADDRESS``
-or ``--workers N`` the runs are Dask tasks (:mod:`qpcontact.studies.cluster`), each still in its
+or ``--workers N`` the runs are Dask tasks (:mod:`qpcontact.cluster`), each still in its
 guarded child process with the same time-out; the references are computed here meanwhile.
 
 Outputs in ``--out``: ``solvers.csv`` (every run), ``solvers.png`` (error against time, log–log,
@@ -51,14 +51,16 @@ from typing import Any
 import numpy as np
 import qpsolvers
 
+from .. import cluster
 from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
 from ..assembly import ContactSystem, build_system
 from ..errors import InvalidArgumentError, UnknownSolverError
 from ..geometry import colliding, find_contacts
 from ..outputs import describe_written, prepare_folder, write_text
+from ..outputs import write_csv as write_table
 from ..resolve import metrics, solve_system
 from ..solvers import QP_FORMS, available_solvers, get_solver
-from . import cluster, harness
+from . import harness
 from .harness import Prepared
 from .scenes import make_scene
 
@@ -162,10 +164,10 @@ def prepare(case: SceneCase) -> Prepared:
 def solve_once(system: ContactSystem, method: Method, tolerance: float, time_limit: float) -> dict[str, Any]:
     """Solve once through :func:`~qpcontact.resolve.solve_system`; returns y, lam, converged,
     status, iterations, setup, solve, message."""
-    y, lam, info = solve_system(system, solver=method.solver, formulation=method.formulation, form=method.form,
-                                tolerance=tolerance, time_limit=time_limit)
-    return {"y": y, "lam": lam, "converged": bool(info["converged"]), "status": info["status"],
-            "iterations": info["iterations"], "setup": info["setup"], "solve": info["solve"], "message": info["message"]}
+    out = solve_system(system, solver=method.solver, formulation=method.formulation, form=method.form,
+                       tolerance=tolerance, time_limit=time_limit)
+    return {"y": out.y, "lam": out.lam, "converged": out.converged, "status": out.status, "iterations": out.iterations,
+            "setup": out.setup_seconds, "solve": out.solve_seconds, "message": out.message}
 
 
 def repeated(system: ContactSystem, method: Method, tolerance: float, time_limit: float, repeats: int) -> dict[str, Any]:
@@ -521,7 +523,7 @@ def read_csv(path: Path) -> list[dict[str, Any]]:
 
 
 def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    harness.write_csv(rows, path, COLUMNS, digits=6)
+    write_table(rows, path, COLUMNS, digits=6)
 
 
 #: The files ``qpcontact compare`` writes in its folder.

@@ -47,19 +47,21 @@ from .harness import guarded
 
 OUTPUTS = ("grown.md", "grown.json", "grown.png")
 #: The velocity step of one step (table 2): (label, settings changes).
-VELOCITY_SOLVES = (("velocity, clarabel 1e-6", dict(solver="clarabel", tolerance=1e-6)),
-                   ("velocity, osqp 1e-3", dict(solver="osqp", tolerance=1e-3)))
+VELOCITY_SOLVES = (("velocity, clarabel 1e-6", dict(velocity_solver="clarabel", velocity_tolerance=1e-6)),
+                   ("velocity, osqp 1e-3", dict(velocity_solver="osqp", velocity_tolerance=1e-3)))
 
 
 def _settings(dimensions: int, step: str, n_cells: int, changes: dict[str, Any] | None = None) -> Settings:
-    return Settings(n_cells=n_cells, dimensions=dimensions, step=step, **(changes or {}))
+    """The run's settings: the defaults with these, by name (:meth:`Settings.updated`)."""
+    return Settings().updated({"cells": n_cells, "dimensions": dimensions, "step": step, **(changes or {})},
+                              "bench-grown")
 
 
 def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) -> dict[str, Any]:
-    """Grow one colony (``Settings(**settings)``) from one cell to the largest of ``sizes`` and
-    time it (run in a child process by :func:`run_growth`). The state at each size is saved in
-    ``save_dir`` (when given) as ``{dimensions}d-{size}.npz``."""
-    run_settings = Settings(**settings)
+    """Grow one colony (``settings``: :meth:`Settings.to_tables`) from one cell to the largest of
+    ``sizes`` and time it (run in a child process by :func:`run_growth`). The state at each size
+    is saved in ``save_dir`` (when given) as ``{dimensions}d-{size}.npz``."""
+    run_settings = Settings.from_stored(settings, "bench-grown")
     reached: dict[int, dict[str, float]] = {}
     start = time.perf_counter()
 
@@ -69,7 +71,7 @@ def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) 
                 reached[size] = dict(seconds=time.perf_counter() - start, step=step, time=colony.time,
                                      cells=colony.cells.n)
                 if save_dir is not None:
-                    save_colony(Path(save_dir) / f"{run_settings.dimensions}d-{size}.npz", colony, step)
+                    save_colony(Path(save_dir) / f"{run_settings.run.dimensions}d-{size}.npz", colony, step)
 
     run = run_colony(run_settings, progress=False, hook=note)
     note(run.colony, run.steps)  # the last state, which no hook call sees
@@ -80,11 +82,42 @@ def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) 
         half = np.flatnonzero(cells >= cells[-1] / 2)[0]
         if cells[-1] > cells[half]:
             doubling = float((times[-1] - times[half]) / np.log2(cells[-1] / cells[half]))
+    seconds = np.asarray(history["step_seconds"], float)
     return dict(reached=reached, steps=run.steps, wall=run.wall_seconds, error=run.error,
+                slope=step_time_slope(cells, seconds, sizes), step_cells=cells.tolist(), step_seconds=seconds.tolist(),
                 max_overlap=float(max(history["max_overlap"], default=0.0)),
                 linearizations=int(np.sum(history["linearizations"])), cells=int(run.colony.cells.n),
-                own_doubling=float(np.log(2.0) / settings.get("rate", np.log(2.0))), doubling=doubling,
+                own_doubling=float(np.log(2.0) / run_settings.model.rate), doubling=doubling,
                 peak_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+
+
+#: The log-log slope of step time against cells is fitted from this many cells on (the target of
+#: issue 22: 2·10³ to 2·10⁴ in 2D), to the largest size of the run.
+SLOPE_FROM = 2000
+
+
+def step_time_slope(cells: np.ndarray, seconds: np.ndarray, sizes: list[int]) -> float:
+    """The slope of ``log(step seconds)`` against ``log(cells)`` over the steps of a growth run
+    from :data:`SLOPE_FROM` cells to the largest of ``sizes`` (least squares; NaN with fewer
+    than 5 such steps or a range of less than a doubling). Each step's size is the colony's
+    after it."""
+    cells, seconds = np.asarray(cells, float), np.asarray(seconds, float)
+    use = (cells >= SLOPE_FROM) & (cells <= max(sizes)) & (seconds > 0)
+    if use.sum() < 5 or cells[use].max() < 2 * cells[use].min():
+        return float("nan")
+    return float(np.polyfit(np.log(cells[use]), np.log(seconds[use]), 1)[0])
+
+
+#: The tolerance of the reference step the one-step table compares each position step with.
+REFERENCE_TOLERANCE = 1e-8
+
+
+def end_difference(a: Colony, b: Colony) -> float:
+    """Largest distance between the same cell's centres or tips in two states [diameters]."""
+    ca, cb = a.cells, b.cells
+    tips = [ca.centers + s * 0.5 * ca.lengths[:, None] * ca.axes - (cb.centers + s * 0.5 * cb.lengths[:, None] * cb.axes)
+            for s in (-1.0, 0.0, 1.0)]
+    return float(max(np.linalg.norm(t, axis=1).max(initial=0.0) for t in tips) / (2.0 * np.median(ca.radii)))
 
 
 def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[str, Any],
@@ -99,9 +132,9 @@ def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[
         take_step = step_function(settings, extra)
         dt = settings.time_step_of(colony)
         drive = None
-        if dimensions == 3 and settings.sink_speed:
+        if dimensions == 3 and settings.model.sink_speed:
             drive = np.zeros((colony.cells.n, 7))
-            drive[:, 2] = -settings.sink_speed * colony.cells.masses
+            drive[:, 2] = -settings.model.sink_speed * colony.cells.masses
         t0 = time.perf_counter()
         outcome = take_step(colony, dt, drive=drive)
         seconds.append(time.perf_counter() - t0)
@@ -109,15 +142,19 @@ def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[
     result = outcome.result
     common = dict(label=label, seconds=float(np.median(seconds)), cells=colony.cells.n, dt=outcome.dt)
     if isinstance(result, PositionStepResult):
+        # The same step at a tight solver tolerance: how far the end positions are from its.
+        tight = _settings(dimensions, step, 10**9, {**changes, "position_tolerance": REFERENCE_TOLERANCE})
+        reference = step_function(tight, {})(colony, outcome.dt, drive=drive)
         return dict(common, contacts=len(result.contacts), linearizations=result.iterations,
-                    max_overlap=result.max_overlap)
+                    solver_iterations=result.solver_iterations, max_overlap=result.max_overlap,
+                    difference=end_difference(outcome.colony, reference.colony))
     return dict(common, contacts=len(result.result.contacts), linearizations=1, max_overlap=None)
 
 
 def run_growth(dimensions: int, step: str, sizes: list[int], n_cells: int, save_dir: Path | None,
                timeout: float, changes: dict[str, Any] | None = None) -> dict[str, Any]:
     """:func:`grow_once` in a child process with a time limit; the failure said, not hidden."""
-    settings = _settings(dimensions, step, n_cells, changes).to_dict()
+    settings = _settings(dimensions, step, n_cells, changes).to_tables()
     status, value = guarded(grow_once, (settings, sizes, None if save_dir is None else str(save_dir)), timeout)
     record = dict(dimensions=dimensions, step=step, target=n_cells, changes=changes or {})
     if status == "ok":
@@ -165,8 +202,8 @@ def markdown(growth: list[dict[str, Any]], steps: list[dict[str, Any]], peer: di
     lines = [f"Measured {meta['date']} on {meta['machine']}; `{meta['command']}`.", "",
              "**Time to grow from one cell** (wall seconds until the colony first has that many cells):", "",
              "| dims | step | " + " | ".join(f"{s:,}" for s in sizes) + " | steps | linearizations | largest overlap "
-             "| colony doubling / cells' own | peak memory |",
-             "|---|---|" + "---|" * len(sizes) + "---|---|---|---|---|"]
+             f"| colony doubling / cells' own | peak memory | slope of step time ({SLOPE_FROM:,}+ cells) |",
+             "|---|---|" + "---|" * len(sizes) + "---|---|---|---|---|---|"]
     for r in growth:
         if "error" in r and r.get("reached") is None:
             lines.append(f"| {r['dimensions']}D | {r['step']} | failed: {r['error'].splitlines()[0][:80]} |")
@@ -175,21 +212,26 @@ def markdown(growth: list[dict[str, Any]], steps: list[dict[str, Any]], peer: di
         ratio = r["doubling"] / r["own_doubling"] if r["doubling"] == r["doubling"] else None
         lines.append(f"| {r['dimensions']}D | {r['step']} | " + " | ".join(cells) +
                      f" | {r['steps']} | {r['linearizations']} | {r['max_overlap']:.4f} | {_fmt(ratio, 2)} | "
-                     f"{r['peak_bytes'] / 2**30:.2f} GiB |" + (f" stopped: {r['error'][:60]}" if r.get("error") else ""))
+                     f"{r['peak_bytes'] / 2**30:.2f} GiB | {_fmt(r.get('slope'), 2)} |"
+                     + (f" stopped: {r['error'][:60]}" if r.get("error") else ""))
     if peer is not None:
         cells = [_fmt(peer["reached"].get(s, peer["reached"].get(str(s), {})).get("seconds")) for s in sizes]
         worst = max((v.get("max_overlap", 0.0) for v in peer["reached"].values()), default=0.0)
         lines.append("| 2D | CellModeller (peer) | " + " | ".join(cells) +
                      f" | {peer['steps']} | – | {worst / 1.0:.4f} µm | – | – |")
     lines += ["", "**One step of a grown colony** (median seconds of the same step from the state the position run "
-              "reached; linearizations of the position step; largest overlap after it):", "",
-              "| dims | cells | step | seconds | contacts | linearizations | largest overlap |", "|---|---|---|---|---|---|---|"]
+              "reached; linearizations and solver iterations of the position step; largest overlap after it; the "
+              "largest distance of a centre or tip from where the same step at solver tolerance "
+              f"{REFERENCE_TOLERANCE:g} puts it, in diameters):", "",
+              "| dims | cells | step | seconds | contacts | linearizations | solver iterations | largest overlap "
+              "| end positions against the tight step |", "|---|---|---|---|---|---|---|---|---|"]
     for r in steps:
         if "error" in r:
-            lines.append(f"| {r['dimensions']}D | | {r['label']} | failed: {r['error'].splitlines()[0][:80]} | | | |")
+            lines.append(f"| {r['dimensions']}D | | {r['label']} | failed: {r['error'].splitlines()[0][:80]} | | | | | |")
             continue
         lines.append(f"| {r['dimensions']}D | {r['cells']:,} | {r['label']} | {r['seconds']:.3f} | {r['contacts']:,} | "
-                     f"{r['linearizations']} | {_fmt(r['max_overlap'], 4)} |")
+                     f"{r['linearizations']} | {_fmt(r.get('solver_iterations'))} | {_fmt(r['max_overlap'], 4)} | "
+                     f"{_fmt(r.get('difference'), 5)} |")
     return "\n".join(lines) + "\n"
 
 

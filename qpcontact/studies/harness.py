@@ -6,19 +6,18 @@
   without a time limit of its own (or one that crashes) cannot stop a study. Children start
   from a *forkserver*: forking a process that has already run Clarabel (the references) can
   deadlock on the inherited thread pool (measured: a 20 s guard hit on a solve that takes
-  0.08 s in a fresh process);
-- :func:`write_csv`: one row per run, floats to a fixed number of significant digits.
+  0.08 s in a fresh process).
+
+(The tables' CSV writer is :func:`qpcontact.outputs.write_csv`.)
 """
 
 from __future__ import annotations
 
-import csv
 import multiprocessing
 import time
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -170,20 +169,3 @@ def guarded(fn: Callable[..., Any], args: Sequence[Any] = (), timeout: float = 6
             process.kill()
         process.join()
         parent.close()
-
-
-def write_csv(rows: Iterable[dict[str, Any]], path: Path, columns: Sequence[str], digits: int) -> None:
-    """The rows as CSV with these columns (missing values and None empty, floats to ``digits``
-    significant digits, everything else as ``str``)."""
-    def text(value: Any) -> str:
-        if value is None:
-            return ""
-        if isinstance(value, float):
-            return f"{value:.{digits}g}"
-        return str(value)
-
-    with Path(path).open("w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(columns), extrasaction="ignore")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({k: text(row.get(k)) for k in columns})

@@ -39,7 +39,7 @@ that runs with ``scale=False`` are measured the same way):
 Every run happens in a child process killed after the guard
 (:func:`qpcontact.studies.harness.guarded`), so no backend can hang the report. With
 ``--scheduler ADDRESS`` or ``--workers N`` the runs are Dask tasks
-(:mod:`qpcontact.studies.cluster`), each still in its guarded child process with the same guard.
+(:mod:`qpcontact.cluster`), each still in its guarded child process with the same guard.
 """
 
 from __future__ import annotations
@@ -58,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import cluster
 from ..arguments import (
     add_output_arguments,
     comma_list,
@@ -69,9 +70,10 @@ from ..arguments import (
 )
 from ..errors import InvalidArgumentError, QPContactError
 from ..outputs import describe_written, prepare_folder, write_text
+from ..outputs import write_csv as write_table
 from ..resolve import metrics, resolve
 from ..solvers import DEFAULT_FORM, QP_FORMS, QP_FORMULATIONS, available_solvers, get_solver
-from . import cluster, harness
+from . import harness
 from .catalogue import CATALOGUE
 from .harness import Prepared
 from .scenes import Scene
@@ -236,7 +238,7 @@ CSV_FIELDS = ("case", "family", "solver", "formulation", "form", "scale", "outco
 
 
 def write_csv(rows: list[dict[str, Any]], path: Path) -> None:
-    harness.write_csv(rows, path, CSV_FIELDS, digits=3)
+    write_table(rows, path, CSV_FIELDS, digits=3)
 
 
 def _column(row: dict[str, Any]) -> str:

@@ -14,7 +14,7 @@ from qpcontact.colony.runs import RunFolder
 from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.errors import ModelHookError
 
-SETTINGS = Settings(n_cells=10**6, max_dt=0.1, max_steps=30, rate_noise=0.0)
+SETTINGS = Settings().updated({"cells": 10**6, "max_dt": 0.1, "max_steps": 30, "rate_noise": 0.0})
 
 
 def test_a_hook_sets_growth_rates_and_division_lengths():
@@ -31,7 +31,7 @@ def test_a_hook_sets_growth_rates_and_division_lengths():
 
     run = run_colony(SETTINGS, progress=False, hook=hook)
     run_colony(SETTINGS, progress=False, hook=watch)
-    assert calls == list(range(SETTINGS.max_steps)) and not run.error
+    assert calls == list(range(SETTINGS.run.max_steps)) and not run.error
     # Cells with odd ids do not grow: they keep their length at birth, half of 3 µm (and what
     # grew in the last step) less a radius.
     odd = run.colony.ids % 2 == 1
@@ -43,10 +43,29 @@ def test_a_hook_sets_growth_rates_and_division_lengths():
 
 def test_a_hook_pushes_cells_with_extra_momenta():
     """A free cell driven at 1 µm per doubling time along x moves exactly that far."""
-    settings = Settings(n_cells=10**6, max_dt=0.1, max_steps=12, rate=0.0, rate_noise=0.0)
+    settings = Settings().updated({"cells": 10**6, "max_dt": 0.1, "max_steps": 12, "rate": 0.0, "rate_noise": 0.0})
     run = run_colony(settings, progress=False, hook=lambda colony, step: StepControl(drive=push(colony, [1.0, 0, 0])))
     assert run.colony.cells.n == 1
     assert run.colony.cells.centers[0] == pytest.approx([run.colony.time, 0.0, 0.0], abs=1e-9)
+
+
+def test_a_hook_that_takes_mechanics_gets_each_cells_pressure_of_the_step_before():
+    """One entry per cell of the colony it is given (after division: a newborn has its mother's),
+    zero before the first step, 2D pressure in a 2D run; the pressure the run's history records
+    for the step before (over the cells before division) has the same largest value."""
+    from qpcontact.colony import CellMechanics
+
+    seen = []
+
+    def hook(colony, step, mechanics):
+        assert isinstance(mechanics, CellMechanics) and mechanics.planar
+        assert mechanics.pressure.shape == (colony.cells.n,) and mechanics.stress.shape == (colony.cells.n, 3, 3)
+        seen.append(mechanics.pressure.max())
+
+    run = run_colony(SETTINGS, progress=False, hook=hook)
+    assert not run.error and len(seen) == SETTINGS.run.max_steps
+    assert seen[0] == 0.0 and max(seen) > 0
+    assert seen[1:] == pytest.approx(run.history["max_pressure"][:-1], rel=0, abs=0)
 
 
 def test_a_hook_may_return_a_colony_or_none():
@@ -78,15 +97,15 @@ def test_simulate_runs_a_model_file_and_saves_it_in_the_settings(tmp_path, capsy
     model.write_text("import numpy as np\n\ndef hook(colony, step):\n"
                      "    return colony.replace(rates=np.full(colony.cells.n, 2.0))\n")
     out = tmp_path / "run"
-    assert main(["simulate", "--model", str(model), "--cells", "4", "--out", str(out), "--quiet"]) == 0
-    assert f'model = "{model}"' in (out / "config.toml").read_text()
+    assert main(["simulate", "--hook", str(model), "--cells", "4", "--out", str(out), "--quiet"]) == 0
+    assert f'hook = "{model}"' in (out / "config.toml").read_text()
     broken = tmp_path / "broken.py"
     broken.write_text("def hook(colony, step):\n    raise RuntimeError('my model is wrong')\n")
     capsys.readouterr()
-    assert main(["simulate", "--model", str(broken), "--out", str(tmp_path / "b"), "--quiet"]) == 1
+    assert main(["simulate", "--hook", str(broken), "--out", str(tmp_path / "b"), "--quiet"]) == 1
     err = capsys.readouterr().err
     assert "Traceback" in err and "broken.py" in err and "my model is wrong" in err  # the model's own traceback
-    assert main(["simulate", "--model", str(tmp_path / "nosuch.py"), "--out", str(tmp_path / "c"), "--quiet"]) == 2
+    assert main(["simulate", "--hook", str(tmp_path / "nosuch.py"), "--out", str(tmp_path / "c"), "--quiet"]) == 2
     assert "nosuch.py: no such file" in capsys.readouterr().err
 
 

@@ -49,6 +49,24 @@ def test_history_panels_do_not_plot_clipped_floors_as_data():
     assert np.isnan(lines[1].get_ydata()[0]) and lines[1].get_ydata()[1] == 0.01
     labels = [ax.get_xlabel() for ax in figure.axes[2:]] + [figure.axes[1].get_ylabel(), figure.axes[2].get_ylabel()]
     assert labels == ["time [doubling times]"] * 2 + ["overlap [fraction of the diameter]", "contact solve per step [s]"]
+    assert figure.axes[3].get_ylabel() == "contact solve residual [dimensionless, scaled]"
+
+
+def test_each_history_panel_of_a_position_run_shows_its_own_quantity():
+    """history.png plotted the position step's overlap twice: as "largest overlap" and as a
+    solver "penetration" labelled dimensionless and scaled."""
+    from qpcontact.colony import plots
+
+    history = {"time": [0.0, 1.0, 2.0], "cells": [1, 2, 3], "max_overlap": [0.004, 0.009, 0.008],
+               "mean_overlap": [0.001, 0.002, 0.002], "solve_seconds": [0.01, 0.02, 0.03],
+               "penetration": [np.nan] * 3, "complementarity": [np.nan] * 3, "linearizations": [1, 2, 1],
+               "rejected": [0, 1, 0]}
+    figure = plots.history_figure(history)
+    panels = [[tuple(np.asarray(line.get_ydata(), dtype=float)) for line in ax.get_lines()] for ax in figure.axes]
+    series = [s for panel in panels for s in panel]
+    assert len(series) == len(set(series)) == 6  # no quantity drawn twice
+    assert figure.axes[3].get_ylabel() == "per step [count]" and panels[3][0] == (1.0, 2.0, 1.0)
+    assert len({ax.get_ylabel() for ax in figure.axes}) == 4
 
 
 def test_a_3d_colony_is_drawn_from_above_and_from_the_side_with_walls_and_units(tmp_path, monkeypatch):
@@ -71,3 +89,30 @@ def test_a_3d_colony_is_drawn_from_above_and_from_the_side_with_walls_and_units(
     z_outline = plots.capsule_outlines(cells, "side")[2][:, 1]
     assert z_outline.max() == pytest.approx(1.5 + 0.6 + 0.5, abs=0.02)  # the tilted cell rises in the side view
     assert side.get_ylim()[0] <= 0.0 <= side.get_ylim()[1]
+
+
+def test_cells_coloured_by_pressure_have_a_colour_bar_with_units_and_the_profile_a_fit(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from qpcontact.colony import plots
+    from qpcontact.errors import InvalidArgumentError
+
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-8, 8, (300, 2))
+    cells = q.Cells(centers=np.c_[xy, np.zeros(300)], axes=[[1, 0, 0]] * 300, lengths=1.0, radii=0.5)
+    r = np.linalg.norm(xy - xy.mean(axis=0), axis=1)
+    pressure = 2.0 * (11.0**2 - r**2)
+    plots.save_colony_picture(tmp_path / "c.png", cells, values=pressure, value_label=plots.pressure_label(True))
+    top, colorbar = saved[0].axes
+    assert colorbar.get_ylabel().startswith("2D pressure [F/µm]") and "1 µm³" in colorbar.get_ylabel()
+    # The scale tops out at the 99th percentile (a force chain would leave the rest dark), and says so.
+    assert top.collections[0].get_clim() == (pytest.approx(pressure.min()), pytest.approx(np.percentile(pressure, 99)))
+    assert plots._beyond(top.collections[0]) == "max"
+    assert plots.pressure_label(False).startswith("pressure [F/µm²]")
+    plots.plot_pressure_profile(tmp_path / "p.png", cells, pressure)
+    legend = [text.get_text() for text in saved[1].axes[0].get_legend().get_texts()]
+    assert any("a = 2, R = 11 µm" in text for text in legend), legend
+    with pytest.raises(InvalidArgumentError, match="values: expected one number per cell"):
+        plots.save_colony_picture(tmp_path / "c.png", cells, values=pressure[:3])

@@ -22,7 +22,9 @@ from qpcontact.errors import OutputFolderError
 from tests.helpers import default_signals, gate_model, wait_for
 
 #: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
-SETTINGS = Settings(n_cells=10**6, dimensions=3, max_dt=0.1, growth_per_step=0.1, max_steps=48)
+SETTINGS = Settings().updated({"cells": 10**6, "dimensions": 3, "max_dt": 0.1, "growth_per_step": 0.1, "max_steps": 48})
+#: The same run with a snapshot every 10 steps (the trajectory does not change).
+EVERY_10 = SETTINGS.updated({"snapshot_every": 10})
 TRAJECTORY = [name for name in HISTORY_FIELDS if name not in TIMING_FIELDS]
 
 
@@ -44,7 +46,7 @@ def assert_identical(a, b) -> None:
 def test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, monkeypatch, when):
     """Before, --start restarted the step counter at 0 and the random generator at the seed."""
     full = run_colony(SETTINGS, progress=False, folder=RunFolder.create(tmp_path / "full"))
-    assert full.steps == SETTINGS.max_steps and full.colony.cells.n > 8 and not full.error
+    assert full.steps == SETTINGS.run.max_steps and full.colony.cells.n > 8 and not full.error
 
     fired = []
 
@@ -59,7 +61,7 @@ def test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, m
         hook = None
         append = RunFolder.append_history
         monkeypatch.setattr(RunFolder, "append_history", lambda self, row: (append(self, row), ctrl_c(row["step"])))
-    part = run_colony(SETTINGS, progress=False, folder=RunFolder.create(tmp_path / "part"), snapshot_every=10, hook=hook)
+    part = run_colony(EVERY_10, progress=False, folder=RunFolder.create(tmp_path / "part"), hook=hook)
     stopped = 21 if when == "during a step" else 22
     assert part.interrupted == signal.SIGINT and part.steps == stopped and not part.error
     assert sorted(p.name for p in (tmp_path / "part" / "snapshots").iterdir()) == [
@@ -67,9 +69,9 @@ def test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, m
     monkeypatch.undo()
 
     snapshot = load_snapshot(tmp_path / "part" / "snapshots" / f"step_{stopped:06d}.npz")
-    resumed = run_colony(SETTINGS, start=snapshot, progress=False, folder=RunFolder.resume(tmp_path / "part", snapshot),
-                         snapshot_every=10)
-    assert (resumed.first_step, resumed.steps) == (stopped, SETTINGS.max_steps)
+    assert Settings.from_stored(snapshot.settings, "snapshot") == EVERY_10  # the settings travel with the state
+    resumed = run_colony(EVERY_10, start=snapshot, progress=False, folder=RunFolder.resume(tmp_path / "part", snapshot))
+    assert (resumed.first_step, resumed.steps) == (stopped, SETTINGS.run.max_steps)
     assert_identical(resumed.colony, full.colony)
     assert history(tmp_path / "part") == history(tmp_path / "full")  # appended, one row per step
 
@@ -80,7 +82,7 @@ def held_run(tmp_path, step, *argv):
     gate = gate_model(tmp_path, step)
     out = tmp_path / "run"
     process = subprocess.Popen([sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out),
-                                "--quiet", "--max-dt", "0.1", "--model", str(gate), *argv],
+                                "--quiet", "--max-dt", "0.1", "--hook", str(gate), *argv],
                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
     try:
         wait_for(lambda: (tmp_path / "held").exists() or process.poll() is not None, "the run held at its gate", 120)
@@ -186,13 +188,15 @@ def test_resume_without_a_snapshot_is_a_one_line_error(tmp_path, capsys):
 
 def test_a_config_file_sets_the_run_flags_override_it_and_it_is_saved_with_the_run(tmp_path):
     config = tmp_path / "run.toml"
-    config.write_text('n_cells = 3\nsolver = "osqp"\ntolerance = 1e-4\nmax_dt = 0.1\nseed = 7\nsnapshot_every = 4\n')
+    config.write_text("[run]\ncells = 3\nmax_dt = 0.1\nseed = 7\n[output]\nsnapshot_every = 4\n"
+                      "[position]\ntolerance = 1e-4\nmargin = 0.4\n")
     out = tmp_path / "run"
     assert main(["simulate", "--config", str(config), "--seed", "8", "--out", str(out), "--quiet"]) == 0
-    saved = read_toml(out / "config.toml")
-    settings = {**Settings().to_dict(), "n_cells": 3, "solver": "osqp", "tolerance": 1e-4, "max_dt": 0.1, "seed": 8}
-    assert saved == {**settings, "snapshot_every": 4, "vtk": False, "gif": False}
-    assert load_snapshot(max((out / "snapshots").iterdir())).settings == settings
+    settings = Settings().updated({"cells": 3, "max_dt": 0.1, "seed": 8, "snapshot_every": 4, "position_tolerance": 1e-4,
+                                   "position_margin": 0.4})
+    assert read_toml(out / "config.toml") == settings.to_tables(applying=True)  # what applies to the run, by table
+    assert "velocity" not in read_toml(out / "config.toml") and "cfl" not in read_toml(out / "config.toml")["run"]
+    assert Settings.from_stored(load_snapshot(max((out / "snapshots").iterdir())).settings, "snapshot") == settings
     assert len(list((out / "snapshots").iterdir())) > 2
     # The saved file runs the same run again.
     again = tmp_path / "again"
@@ -200,43 +204,79 @@ def test_a_config_file_sets_the_run_flags_override_it_and_it_is_saved_with_the_r
     assert history(again) == history(out)
 
 
+def test_a_flat_config_file_of_an_earlier_version_still_loads(tmp_path):
+    """config.toml as runs wrote it before the settings had tables: every setting, flat."""
+    flat = ('n_cells = 3\ndimensions = 2\nsolver = "clarabel"\nformulation = "complementarity"\nform = "auto"\n'
+            "tolerance = 1e-06\nposition_correction = 0.5\nmargin = 0.3\ncfl = 0.3\nmax_dt = 0.1\nradius = 0.5\n"
+            "division_length = 4.0\nrate = 0.6931471805599453\nrate_noise = 0.1\naxis_noise = 0.02\n"
+            'growth_inertia = 500.0\ndynamics = "overdamped"\ndamping = 0.0\nsink_speed = 0.5\nseed = 7\n'
+            'max_steps = 100000\nmax_halvings = 3\noverlap_limit = 0.0\nmodel = ""\nstep = "position"\n'
+            'time_step = "auto"\ngrowth_per_step = 0.05\noverlap_tolerance = 0.02\nturn_limit = 0.2\n'
+            'position_solver = "ipm"\nposition_tolerance = 0.001\nsnapshot_every = 4\nvtk = false\ngif = false\n')
+    (tmp_path / "old.toml").write_text(flat)
+    out = tmp_path / "run"
+    assert main(["simulate", "--config", str(tmp_path / "old.toml"), "--out", str(out), "--quiet"]) == 0
+    saved = Settings.from_stored(read_toml(out / "config.toml"), "saved")
+    assert (saved.run.cells, saved.run.seed, saved.model.growth_inertia_ratio, saved.position.overlap_tolerance,
+            saved.output.snapshot_every) == (3, 7, 500.0, 0.02, 4)
+    # A value the run would have ignored is refused now, naming it and why.
+    (tmp_path / "ignored.toml").write_text(flat.replace('solver = "clarabel"', 'solver = "osqp"'))
+    assert main(["simulate", "--config", str(tmp_path / "ignored.toml"), "--out", str(tmp_path / "x"), "--quiet"]) == 2
+
+
 @pytest.mark.parametrize("text, message", [
-    ("n_celss = 3\n", "unknown setting 'n_celss'"),
-    ('n_cells = "many"\n', "n_cells must be an integer"),
-    ("cfl = -1.0\n", "cfl: must be finite and > 0"),
-    ("[simulate]\nn_cells = 3\n", "simulate is a table or array"),
-    ("vtk = 1\n", "vtk must be true or false"),
-    ("snapshot_every = -2\n", "snapshot_every: must be an integer >= 0"),
+    ("n_celss = 3\n", "unknown setting 'n_celss'; known: [model] radius, division_length"),
+    ("[run]\ncels = 3\n", "unknown setting 'cels' in [run]; known: [model] radius"),
+    ('[run]\ncells = "many"\n', "[run] cells: expected an integer, got 'many'"),
+    ("[run]\ncfl = -1.0\n", "[run] cfl: expected a number > 0, got -1.0"),
+    ("[simulate]\ncells = 3\n", "unknown table [simulate]"),
+    ("[output]\nvtk = 1\n", "[output] vtk: expected true or false, got 1"),
+    ("[output]\nsnapshot_every = -2\n", "[output] snapshot_every: expected an integer >= 0, got -2"),
     ("n_cells = \n", "not a TOML file"),
-    ('solver = "nosuch"\n', "unknown solver 'nosuch'"),
+    ('[position]\nsolver = "nosuch"\n', "unknown solver 'nosuch'"),
+    ("[position]\ntolerance = 2.0\n", "[position] tolerance: expected a number in (0, 1), got 2.0"),
+    ('[velocity]\nsolver = "osqp"\n', "[velocity] solver: a setting of the velocity step; this run takes position steps"),
+    ("[model]\nsink_speed = 1.0\n", "[model] sink_speed: 3D only"),
+    ("[model]\ndivision_length = 0.5\n", "[model] division_length: must exceed 2 × radius = 1 µm"),
 ])
 def test_a_bad_config_file_is_a_one_line_error(tmp_path, capsys, text, message):
     (tmp_path / "run.toml").write_text(text)
     assert main(["simulate", "--config", str(tmp_path / "run.toml"), "--out", str(tmp_path / "run"), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and message in err and not (tmp_path / "run").exists()
+    assert err.count("\n") == 1 and message in err and not (tmp_path / "run").exists(), err
+
+
+def test_a_config_files_known_keys_are_every_setting():
+    """The config error's list of known keys left out keys it accepted."""
+    from qpcontact.described import known_names, settings_of
+
+    listing = known_names(Settings)
+    for s in settings_of(Settings):
+        assert f"[{s.table}] " in listing and s.key in listing.split(f"[{s.table}] ")[1].split(";")[0], s.path
 
 
 def test_toml_round_trip_is_exact():
-    values = {**Settings().to_dict(), "tolerance": 1.0000000000000002e-06, "model": 'a "quoted" \\ name\n', "flag": True,
-              "big": float("inf")}
+    values = {**Settings().to_tables(), "extra": {"tolerance": 1.0000000000000002e-06, "model": 'a "quoted" \\ name\n',
+                                                  "flag": True, "big": float("inf")}, "top": 1}
     import tomllib
 
     assert tomllib.loads(write_toml(values, "two\nlines")) == values
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"seed": -1}, "seed: must be an integer >= 0"),
-    ({"max_steps": 2.5}, "max_steps: must be an integer >= 1"),
-    ({"dynamics": "wobbly"}, "dynamics: must be overdamped or inertial"),
-    ({"solver": "nosuch"}, "unknown solver 'nosuch'"),
-    ({"formulation": "nosuch"}, "formulation/form"),
+    ({"seed": -1}, "seed: expected an integer >= 0, got -1"),
+    ({"max_steps": 2.5}, "max_steps: expected an integer, got 2.5"),
+    ({"velocity_dynamics": "wobbly"}, "velocity_dynamics: expected one of overdamped, inertial"),
+    ({"step": "velocity", "velocity_solver": "nosuch"}, "unknown solver 'nosuch'"),
+    ({"velocity_formulation": "nosuch"}, "velocity_formulation: expected one of least_squares, complementarity"),
+    ({"position_solver": "linear"}, "position_solver: 'linear' takes no bounds"),
+    ({"nosuch": 1}, "unknown setting 'nosuch'"),
 ])
 def test_settings_no_run_can_use_are_refused_when_made(change, message):
     from qpcontact.errors import QPContactError
 
     with pytest.raises(QPContactError, match=message):
-        Settings(**change)
+        Settings().updated(change)
 
 
 @pytest.mark.slow
@@ -253,3 +293,42 @@ def test_a_killed_run_leaves_whole_snapshots_and_resumes_with_a_contiguous_histo
     assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == 0
     assert [int(row["step"]) for row in history(out)] == list(range(13))
     assert not [p for p in out.rglob(".*.tmp")]
+
+
+def test_a_run_with_pressure_growth_resumed_from_a_snapshot_equals_the_uninterrupted_one(tmp_path):
+    """The growth of each step depends on the pressure of the step before: the snapshots keep it,
+    so a run resumed from one continues exactly (a run that forgot it would grow the first step
+    after the resume unslowed)."""
+    from qpcontact.colony import PressureGrowth
+
+    settings = Settings().updated({"cells": 10**6, "max_steps": 40})
+    growth = PressureGrowth("exponential", 5.0)
+    full = run_colony(settings, progress=False, pressure_growth=growth)
+    part = run_colony(settings.updated({"max_steps": 25}), progress=False, pressure_growth=growth,
+                      folder=RunFolder.create(tmp_path / "part"))
+    snapshot = load_snapshot(tmp_path / "part" / "snapshots" / "step_000025.npz")
+    np.testing.assert_array_equal(snapshot.mechanics.pressure, part.mechanics.pressure)
+    resumed = run_colony(settings, start=snapshot, progress=False, pressure_growth=growth)
+    assert_identical(resumed.colony, full.colony)
+    np.testing.assert_array_equal(resumed.mechanics.stress, full.mechanics.stress)
+    # The law did act: slower growth, so longer steps (the fastest cell grows 5 % per step).
+    assert full.colony.time > run_colony(settings, progress=False).colony.time
+
+
+def test_a_run_folder_written_before_the_pressure_columns_is_resumed(tmp_path):
+    """history.csv without mean_pressure and max_pressure (an earlier qpcontact): its rows are
+    kept, with those columns NaN, and the resumed steps have them."""
+    out = tmp_path / "run"
+    assert main(["simulate", "--cells", "3", "--out", str(out), "--quiet", "--snapshot-every", "5", "--max-dt", "0.1",
+                 "--max-steps", "10"]) == 0
+    legacy = [name for name in HISTORY_FIELDS if name not in ("mean_pressure", "max_pressure")]
+    with (out / "history.csv").open(newline="") as fh:
+        rows = [{k: row[k] for k in legacy} for row in csv.DictReader(fh)]
+    with (out / "history.csv").open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=legacy)
+        writer.writeheader()
+        writer.writerows(rows)
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == 0
+    history = RunFolder(out).read_history()
+    assert len(history["step"]) == 13 and np.all(np.isnan(history["mean_pressure"][:10]))
+    assert np.all(np.isfinite(history["mean_pressure"][10:]))

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import qpcontact as q
+from qpcontact.colony import settings as settings_module
 from qpcontact.colony import simulate
 from qpcontact.colony.snapshots import load_colony
 from qpcontact.errors import InvalidArgumentError
@@ -29,17 +30,19 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
 
 
 @pytest.mark.parametrize("change, message", [
-    ({"cfl": -1.0}, "cfl: must be finite and > 0"),
-    ({"overlap_limit": float("nan")}, "overlap_limit: must be finite and >= 0"),
-    ({"n_cells": 0}, "n_cells: must be an integer >= 1"),
-    ({"dimensions": 4}, "dimensions: must be 2 or 3"),
-    ({"position_correction": 1.5}, r"position_correction: must be in \[0, 1\]"),
+    ({"cfl": -1.0}, "cfl: expected a number > 0, got -1.0"),
+    ({"velocity_overlap_limit": float("nan")}, "velocity_overlap_limit: expected a finite number"),
+    ({"cells": 0}, "cells: expected an integer >= 1, got 0"),
+    ({"dimensions": 4}, "dimensions: expected one of 2, 3, got 4"),
+    ({"velocity_position_correction": 1.5}, r"velocity_position_correction: expected a number in \[0, 1\]"),
+    ({"position_tolerance": 2.0}, r"position_tolerance: expected a number in \(0, 1\)"),
+    ({"division_length": 0.5}, "division_length: must exceed 2 × radius = 1 µm"),
 ])
 def test_simulate_settings_are_checked(change, message):
     from qpcontact.colony.simulate import Settings
 
     with pytest.raises(InvalidArgumentError, match=message):
-        Settings(**change)
+        Settings().updated(change)
 
 
 def test_a_default_run_takes_position_steps_and_keeps_their_tolerance(monkeypatch):
@@ -52,13 +55,13 @@ def test_a_default_run_takes_position_steps_and_keeps_their_tolerance(monkeypatc
     real = simulate.grow_position
     monkeypatch.setattr(simulate, "grow_position", lambda *a, **k: calls.append(1) or real(*a, **k))
     monkeypatch.setattr(simulate, "grow", lambda *a, **k: pytest.fail("the velocity step ran"))
-    settings = Settings(n_cells=150)
+    settings = Settings().updated({"cells": 150})
     run = run_colony(settings, progress=False)
     assert not run.error and run.colony.cells.n >= 150
     steps = len(run.history["max_overlap"])
     assert steps > 50 and len(calls) >= steps  # (a step retried to clear a division's overlap calls twice)
-    assert max(run.history["max_overlap"]) <= settings.overlap_tolerance
-    assert max(independent_overlaps(run.colony.cells)) <= settings.overlap_tolerance
+    assert max(run.history["max_overlap"]) <= settings.position.overlap_tolerance
+    assert max(independent_overlaps(run.colony.cells)) <= settings.position.overlap_tolerance
 
 
 # ------------------------------------------------------------------------------------------
@@ -124,20 +127,20 @@ def test_every_saved_snapshot_keeps_the_steps_overlap_tolerance(tmp_path, dimens
     from qpcontact.colony.simulate import Settings, run_colony
     from qpcontact.colony.snapshots import load_snapshot
 
-    settings = Settings(n_cells=n_cells, dimensions=dimensions)
-    run = run_colony(settings, progress=False, folder=RunFolder.create(tmp_path / "run"), snapshot_every=1)
+    settings = Settings().updated({"cells": n_cells, "dimensions": dimensions, "snapshot_every": 1})
+    run = run_colony(settings, progress=False, folder=RunFolder.create(tmp_path / "run"))
     assert not run.error and run.colony.cells.n >= n_cells
     snapshots = sorted((tmp_path / "run" / "snapshots").glob("step_*.npz"))
     assert len(snapshots) == run.steps
     divided = 0
     for path in snapshots:
         cells = load_snapshot(path).colony.cells
-        assert max(independent_overlaps(cells)) <= settings.overlap_tolerance, path.name
+        assert max(independent_overlaps(cells)) <= settings.position.overlap_tolerance, path.name
         if dimensions == 3:  # the substrate z = 0 too
             assert np.all(cells.centers[:, 2] - np.abs(cells.axes[:, 2]) * cells.lengths / 2 >= cells.radii * 0.99)
         divided = max(divided, cells.n)
     assert divided == run.colony.cells.n
-    assert max(independent_overlaps(run.colony.cells)) <= settings.overlap_tolerance
+    assert max(independent_overlaps(run.colony.cells)) <= settings.position.overlap_tolerance
 
 
 def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbour():
@@ -156,7 +159,8 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
     plain, _, dt_plain, rejected_plain = grow_with_retries(colony, 0.1, Settings(), **options)
     assert (dt_plain, rejected_plain) == (0.1, 0)
     assert largest_overlap(plain.cells) == pytest.approx(0.5, abs=1e-9)
-    limited, _, dt_limited, rejected = grow_with_retries(colony, 0.1, Settings(overlap_limit=0.1), **options)
+    limited, _, dt_limited, rejected = grow_with_retries(colony, 0.1, Settings().updated({"velocity_overlap_limit": 0.1}),
+                                                         **options)
     assert (dt_limited, rejected) == (0.05, 1)
     assert largest_overlap(limited.cells) <= 1e-9
 
@@ -165,14 +169,14 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
 def test_the_time_step_follows_the_expansion_of_a_colony_of_the_runs_dimensions(dimensions, monkeypatch):
     """3D runs used to size their step as 2D (expansion_time_step's dimensions were never passed)."""
     passed = []
-    real = simulate.expansion_time_step
+    real = settings_module.expansion_time_step
 
     def spy(colony, **kwargs):
         passed.append(kwargs.get("dimensions"))
         return real(colony, **kwargs)
 
-    monkeypatch.setattr(simulate, "expansion_time_step", spy)
-    settings = simulate.Settings(n_cells=2, dimensions=dimensions, max_steps=3, step="velocity")
+    monkeypatch.setattr(settings_module, "expansion_time_step", spy)
+    settings = simulate.Settings().updated({"cells": 2, "dimensions": dimensions, "max_steps": 3, "step": "velocity"})
     run = simulate.run_colony(settings, progress=False)
     assert not run.error and passed == [dimensions] * run.steps
 
@@ -188,18 +192,117 @@ def test_expansion_time_step_is_shorter_in_2d_than_in_3d():
 
 
 def test_a_step_that_starts_with_more_overlap_than_relaxation_clears_it_within_the_step():
-    """A division that turned a daughter 0.08 of a diameter into a neighbour (more than the 0.05
-    the position step removes per step): the run's step is taken again clearing it, so the state
-    it ends in (and saves) keeps the tolerance; the plain position step would leave ~0.03."""
+    """A division that turned a daughter 0.12 of a diameter into a neighbour (more than the step
+    removes: ``relaxation`` 0.05 plus ``aim`` 0.02, the gap its linearizations aim at): the run's
+    step is taken again clearing it, so the state it ends in (and saves) keeps the tolerance; the
+    plain position step would leave ~0.05."""
     from qpcontact.colony import Colony, PositionSettings, grow_position
     from qpcontact.colony.simulate import Settings, position_step_function
 
-    cells = q.Cells([[0.0, 0.0, 0.0], [0.3, 0.92, 0.0]], [1, 0, 0], [2.0, 1.5], 0.5)
+    cells = q.Cells([[0.0, 0.0, 0.0], [0.3, 0.88, 0.0]], [1, 0, 0], [2.0, 1.5], 0.5)
     colony = Colony.founder(cells, 0.7)
-    assert max(independent_overlaps(colony.cells)) == pytest.approx(0.08)
+    assert max(independent_overlaps(colony.cells)) == pytest.approx(0.12)
     plain, out = grow_position(colony, 0.01, planar=True, settings=PositionSettings())
-    assert out.max_overlap > 0.02  # the relaxation's bounded speed alone
-    settings = Settings(n_cells=10)
+    assert out.max_overlap > 0.02  # the relaxation's bounded speed (and the aim) alone
+    settings = Settings().updated({"cells": 10})
     outcome = position_step_function(settings, {})(colony, 0.01)
-    assert outcome.result.max_overlap <= settings.overlap_tolerance
-    assert max(independent_overlaps(outcome.colony.cells)) <= settings.overlap_tolerance
+    assert outcome.result.max_overlap <= settings.position.overlap_tolerance
+    assert max(independent_overlaps(outcome.colony.cells)) <= settings.position.overlap_tolerance
+
+
+def bare_run(settings):
+    """What a run was before it measured pressure: the founder, then per step division and the
+    run's step function, nothing else (2D: no drive)."""
+    from qpcontact.colony import divide
+    from qpcontact.colony.simulate import founder, step_function
+
+    model = settings.model
+    colony, rng, extra = founder(settings), np.random.default_rng(settings.run.seed), {}
+    take_step = step_function(settings, extra)
+    for _ in range(settings.run.max_steps):
+        if colony.cells.n >= settings.run.cells:
+            break
+        colony = divide(colony, model.division_length, rng, axis_noise=model.axis_noise,
+                        rate_noise=model.rate_noise, base_rate=model.rate, planar=True)
+        colony = take_step(colony, settings.time_step_of(colony), drive=None).colony
+    return colony
+
+
+@pytest.mark.parametrize("step", ["position", "velocity"])
+def test_a_run_without_pressure_growth_is_the_bare_loop_bit_for_bit(step):
+    """Measuring pressure changes nothing of a trajectory; pressure growth whose factor is
+    exactly 1 (a stall pressure of 1e300: 1 − p/1e300 rounds to 1) neither."""
+    from qpcontact.colony import PressureGrowth
+    from qpcontact.colony.simulate import Settings, run_colony
+
+    settings = Settings().updated({"cells": 40, "step": step, "max_steps": 60})
+    reference = bare_run(settings)
+    for growth in (None, PressureGrowth("linear", 1e300)):
+        run = run_colony(settings, progress=False, pressure_growth=growth)
+        for name in ("centers", "axes", "lengths", "masses", "growth_inertia"):
+            np.testing.assert_array_equal(getattr(run.colony.cells, name), getattr(reference.cells, name), err_msg=name)
+        for name in ("ids", "parent_ids", "rates", "owed"):
+            np.testing.assert_array_equal(getattr(run.colony, name), getattr(reference, name), err_msg=name)
+        assert run.colony.time == reference.time
+        assert run.mechanics.pressure.shape == (run.colony.cells.n,) and run.mechanics.pressure.max() > 0
+
+
+def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rates(tmp_path):
+    """Linear pressure growth with a stall pressure below the pressures a 150-cell colony
+    reaches: fewer cells after the same time, the slowest growth where the pressure is highest,
+    and the colony's rates (the base rates that daughters draw around) are not the slowed ones."""
+    from qpcontact.colony import PressureGrowth, StepControl, pressure_growth_rate
+    from qpcontact.colony.runs import RunFolder
+    from qpcontact.colony.simulate import Settings, run_colony
+
+    settings = Settings().updated({"cells": 10**6, "max_steps": 120})
+    free = run_colony(settings, progress=False)
+    stall = 0.5 * float(np.median(free.mechanics.pressure))
+    seen = []
+
+    def watch(colony, step, mechanics):  # the pressure the run's growth law sees before each step
+        seen.append((colony.cells.centers, colony.rates.copy(), mechanics.pressure.copy()))
+        return StepControl()
+
+    folder = RunFolder.create(tmp_path / "run")
+    slowed = run_colony(settings, progress=False, pressure_growth=PressureGrowth("linear", stall), hook=watch,
+                        folder=folder)
+    assert not slowed.error and slowed.colony.time == pytest.approx(free.colony.time, rel=0.3)
+    assert slowed.colony.cells.n < 0.8 * free.colony.cells.n
+    assert np.all(slowed.colony.rates > 0.5 * settings.model.rate)  # stored rates are the base rates
+    centers, rates, pressure = seen[-1]
+    effective = pressure_growth_rate(rates, pressure, stall_pressure=stall)
+    r = np.linalg.norm(centers - centers.mean(axis=0), axis=1)
+    inside, edge = r < np.quantile(r, 0.2), r > np.quantile(r, 0.8)
+    assert np.any(effective == 0) and effective[edge].mean() > 1.5 * effective[inside].mean()  # stalled inside
+    # The snapshot of the last state carries the mechanics the run ended with.
+    snapshot = sorted((tmp_path / "run" / "snapshots").glob("*.npz"))[-1]
+    from qpcontact.colony.snapshots import load_snapshot
+
+    np.testing.assert_array_equal(load_snapshot(snapshot).mechanics.pressure, slowed.mechanics.pressure)
+    history = folder.read_history()
+    assert history["max_pressure"][-1] >= history["mean_pressure"][-1] > 0
+
+
+def test_the_history_has_the_mean_and_largest_pressure_and_pictures_colour_by_pressure(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from qpcontact.colony.runs import RunFolder
+    from qpcontact.colony.simulate import Settings, draw_pictures, run_colony
+
+    folder = RunFolder.create(tmp_path / "run")
+    settings = Settings().updated({"cells": 30})
+    run = run_colony(settings, progress=False, folder=folder)
+    history = folder.read_history()
+    assert np.all(np.asarray(history["max_pressure"]) >= np.asarray(history["mean_pressure"]))
+    assert history["max_pressure"][-1] > 0 and history["mean_pressure"][0] == 0.0  # one cell: nothing presses
+    draw_pictures(folder, settings, run, gif=False, color="pressure")
+    assert (tmp_path / "run" / "pressure.png").stat().st_size > 1000
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
+    draw_pictures(folder, settings, run, gif=False, color="pressure")
+    colorbar = saved[0].axes[-1]
+    assert "2D pressure [F/µm]" in colorbar.get_ylabel()
+    assert saved[1].axes[0].get_xlabel() == "distance from the colony's centre r [µm]"
+    with pytest.raises(InvalidArgumentError, match="color: expected one of orientation, pressure"):
+        draw_pictures(folder, settings, run, gif=False, color="red")

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import qpcontact as q
-from qpcontact.colony import Colony
+from qpcontact.colony import CellMechanics, Colony
 from qpcontact.colony.snapshots import (
+    MECHANICS_FIELDS,
     VERSION,
     cell_arrays,
     load_cells,
@@ -65,6 +66,42 @@ def test_version_2_carries_settings_random_state_and_extra_arrays(tmp_path):
         np.testing.assert_array_equal(snapshot.extra[name], value)
     with pytest.raises(InvalidSnapshotError, match="extra array 'a b'"):
         save_colony(tmp_path / "t.npz", a_colony(), extra={"a b": np.zeros(1)})
+
+
+def a_mechanics() -> CellMechanics:
+    stress = np.zeros((2, 3, 3))
+    stress[0] = [[-2.0, 0.5, 0.0], [0.1, -1.0, 0.0], [0.0, 0.0, 0.0]]
+    return CellMechanics(np.array([1.5, 0.0]), stress, True)
+
+
+def test_snapshots_carry_the_cells_pressure_and_stress_and_stay_loadable_both_ways(tmp_path):
+    """The mechanics are three optional keys of version 2: a reader that does not know them
+    (an earlier qpcontact reads only the keys it names, and versions up to 2) ignores them, and
+    a file without them loads with ``mechanics`` None."""
+    path = save_colony(tmp_path / "s.npz", a_colony(), 4, mechanics=a_mechanics())
+    snapshot = load_snapshot(path)
+    np.testing.assert_array_equal(snapshot.mechanics.pressure, [1.5, 0.0])
+    np.testing.assert_array_equal(snapshot.mechanics.stress, a_mechanics().stress)
+    assert snapshot.mechanics.planar and snapshot.version == 2
+    with np.load(path) as data:
+        assert set(MECHANICS_FIELDS) <= set(data.files) and int(data["version"]) == 2
+        assert int(data["stress_dimensions"]) == 2
+    assert load_snapshot(save_colony(tmp_path / "t.npz", a_colony())).mechanics is None
+    with pytest.raises(InvalidSnapshotError, match="mechanics: expected pressure"):
+        save_colony(tmp_path / "u.npz", a_colony(), mechanics=CellMechanics.zero(3, False))
+
+
+@pytest.mark.parametrize("changes, message", [
+    (dict(stress=None), "misses stress"),
+    (dict(pressure=np.array([1.0, np.nan])), "pressure must be"),
+    (dict(stress=np.zeros((2, 3))), "stress must be"),
+    (dict(stress_dimensions=np.array(4)), "stress_dimensions must be 2 or 3"),
+])
+def test_inconsistent_mechanics_in_a_snapshot_are_a_named_error(tmp_path, changes, message):
+    path = save_colony(tmp_path / "s.npz", a_colony(), 1, mechanics=a_mechanics())
+    rewrite(path, **changes)
+    with pytest.raises(InvalidSnapshotError, match=message):
+        load_snapshot(path)
 
 
 def test_version_1_snapshots_written_by_other_tools_still_load(tmp_path):

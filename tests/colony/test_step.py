@@ -5,8 +5,9 @@ import pytest
 
 import qpcontact as q
 from qpcontact.colony.growth import Colony, divide, grow
-from qpcontact.colony.step import advance, rotate, step
+from qpcontact.colony.step import advance, step
 from qpcontact.errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
+from qpcontact.geometry.motion import rotate
 
 
 def rod_pair_end_to_end(gap=0.0):

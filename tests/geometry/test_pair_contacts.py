@@ -264,7 +264,7 @@ def test_step_gives_a_skew_pair_one_contact():
     rng = np.random.default_rng(3)
     for _ in range(10):
         cells = approaching(crossing_pair(rng, lengths=[0.5, 0.5], radii=[0.6, 0.6], overlap=0.2))
-        options = {**Settings(step="velocity").step_options(), "planes": [], "planar": None}
+        options = {**Settings().step_options(), "planes": [], "planar": None}
         out = qc.step(cells, 0.01, **options)
         assert len(out.contacts) == 1 and out.contacts.kind[0] == 0
 

@@ -11,7 +11,7 @@ from qpcontact import solvers
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.resolve import metrics
 from qpcontact.resolve.validation import reference_solution
-from qpcontact.solvers.ipm import NormalMatrix, interior_point
+from qpcontact.solvers.ipm import interior_point
 from qpcontact.studies import scenes
 from tests.helpers import random_scene
 
@@ -123,21 +123,6 @@ def test_time_limit_and_iteration_cap_are_reported():
     assert not out.converged and out.status == "max_iterations" and out.iterations == 2
     out = interior_point(system.matrix, system.rhs, tolerance=1e-12, time_limit=1e-9)
     assert not out.converged and out.status == "time_limit"
-
-
-def test_normal_matrix_refill_equals_the_sparse_product():
-    """The fixed-pattern refill of B diag(w) Bᵀ + diag(d) against scipy's product, for two
-    weightings (the second reuses the symbolic factorization)."""
-    B, _, rng = random_problem(5)
-    normal = NormalMatrix(B)
-    for _ in range(2):
-        w, d = rng.uniform(0.1, 2.0, B.shape[1]), rng.uniform(0.1, 2.0, B.shape[0])
-        solve = normal.factor(w, d)
-        dense = (B @ sp.diags(w) @ B.T).toarray() + np.diag(d)
-        stored = sp.csc_matrix((normal.values(w, d), (normal._rows, normal._cols)), shape=normal.shape).toarray()
-        assert np.allclose(stored, np.tril(dense))
-        v = rng.standard_normal(B.shape[0])
-        assert np.allclose(dense @ solve(v), v)
 
 
 def test_registry_lists_ipm_and_rejects_bounds_for_solvers_without_them():

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-import csv
 import math
 import operator
 import os
 import time
-
-import numpy as np
 
 from qpcontact.resolve import metrics
 from qpcontact.studies import CATALOGUE, harness, make_scene
@@ -39,15 +36,6 @@ def test_guarded_children_start_from_a_forkserver(monkeypatch):
     monkeypatch.setattr(multiprocessing, "get_context", spy)
     assert harness.guarded(abs, (-2,), 10) == ("ok", 2)
     assert contexts == ["forkserver"]
-
-
-def test_write_csv_formats_floats_and_leaves_missing_values_empty(tmp_path):
-    path = tmp_path / "rows.csv"
-    rows = [{"a": 1.0 / 3.0, "b": None, "c": True, "extra": "dropped"}, {"a": np.float64(2.5e-7), "c": 3}]
-    harness.write_csv(rows, path, ("a", "b", "c"), digits=3)
-    with path.open(newline="") as fh:
-        read = list(csv.DictReader(fh))
-    assert read == [{"a": "0.333", "b": "", "c": "True"}, {"a": "2.5e-07", "b": "", "c": "3"}]
 
 
 def test_prepare_gives_references_that_meet_their_own_optimality_conditions():

@@ -2,7 +2,7 @@
 
 Usage (under the benchmark lock, from the repository root):
 
-    flock /tmp/qpcontact-bench.lock python examples/performance_ab.py OLD_CHECKOUT [--sizes 10000,100000]
+    flock /tmp/qpcontact-bench.lock python benchmarks/performance_ab.py OLD_CHECKOUT [--sizes 10000,100000]
 
 ``OLD_CHECKOUT`` is a directory holding the ``qpcontact`` package as it was before the change
 (e.g. ``git worktree add /tmp/old 28997b8``... or any copy). For each colony snapshot the script

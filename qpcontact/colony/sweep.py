@@ -4,12 +4,16 @@ A sweep is a grid of colony runs (:func:`qpcontact.colony.run_colony`): seeds ×
 vary, each combination of the varied values with each seed (``--zip``: the varied lists taken
 side by side, a list of runs, instead of their product)::
 
-    qpcontact sweep --cells 500 --seeds 1,2,3 --vary growth_inertia=100,1000 --vary overlap_tolerance=0.01,0.02
+    qpcontact sweep --cells 500 --seeds 1,2,3 --vary growth_inertia_ratio=100,1000 --vary position_overlap_tolerance=0.01,0.02
 
-or from a configuration file (``--config sweep.toml``): the settings of ``qpcontact simulate``
-as ``name = value`` lines, and a ``[sweep]`` table with ``seeds = [1, 2, 3]``, ``zip = false``
-and ``[sweep.vary]`` lists (``growth_inertia = [100, 1000]``); flags override the file. Every
-run's settings are checked before anything starts: a bad value is exit status 2 and one line.
+or from a configuration file (``--config sweep.toml``): the tables of ``qpcontact simulate``'s
+settings (:mod:`qpcontact.colony.settings`), and a ``[sweep]`` table with ``seeds = [1, 2, 3]``,
+``zip = false`` and ``[sweep.vary]`` lists (``growth_inertia_ratio = [100, 1000]``); flags
+override the file. A varied setting is named as its flag without the dashes (underscores or
+dashes) or by its path (``position.tolerance``). Every run's settings are merged as
+``simulate``'s are (:func:`qpcontact.colony.settings.merge`: defaults, ``--config``, the flags,
+the run's varied values) and checked before anything starts: a bad value, or a setting given that
+applies to none of the runs, is exit status 2 and one line.
 
 Each run is one Dask task (:func:`run_task`) on a local cluster (``--workers N`` processes, one
 thread each; default one per core) or on an existing one (``--scheduler ADDRESS``; ``--out`` must
@@ -19,11 +23,12 @@ then be on a file system the workers share). Outputs in ``--out`` (default ``./s
   simulate`` (``config.toml``, ``history.csv``, ``snapshots/step_NNNNNN.npz``, ``colony.png``,
   ``history.png``), plus ``result.json`` (its measures, once it is finished) and
   ``attempts.jsonl`` (one line per start of its task: when, where, from which step). The name is
-  made of the varied settings and the seed (``growth_inertia-100__seed-2``);
+  made of the varied settings and the seed (``growth_inertia_ratio-100__seed-2``);
 - ``sweep.json``: the sweep (every run's full settings) and each run's status (``pending``,
   ``done``, ``failed`` with its error), written atomically whenever a run finishes;
-- ``summary.csv``: one row per run (:data:`MEASURES`: cells, steps, time, largest overlap,
-  orientational order, times, attempts, error), and ``ensemble.png``: cell count and largest
+- ``summary.csv``: one row per run (its varied settings, the step, solver and tolerance that
+  ran, its pressure-dependent growth, :data:`MEASURES`: cells, steps, time, largest overlap, orientational order, times,
+  attempts, error), and ``ensemble.png``: cell count and largest
   overlap against time, mean and range across seeds for each combination of settings.
 
 Nothing is lost or redone: a task that starts in a folder that holds part of its run continues
@@ -56,26 +61,17 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import comma_list, non_negative_int, positive_int, run_standalone
-from ..colony.growth import Colony
-from ..colony.hooks import Hook, load_hook
-from ..colony.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
-from ..colony.simulate import (
-    RUN_OPTION_NAMES,
-    SETTING_FLAGS,
-    RunOptions,
-    Settings,
-    add_setting_flags,
-    draw_pictures,
-    flags_given,
-    run_colony,
-    updated,
-)
-from ..colony.snapshots import load_snapshot
+from .. import cluster
+from ..arguments import comma_list, non_negative_int, output_folder, positive_int, run_standalone
+from ..described import Layer, find_setting, known_names, parse_text, settings_of
 from ..errors import InvalidArgumentError, OutputFolderError, QPContactError
-from ..outputs import describe_written, prepare_folder, write_text
-from . import cluster
-from .harness import write_csv
+from ..outputs import describe_written, prepare_folder, write_csv, write_text
+from .growth import Colony
+from .hooks import Hook, load_hook
+from .runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
+from .settings import Settings, add_setting_flags, file_layer, flag_layer, merge, refuse_unused
+from .simulate import draw_pictures, run_colony
+from .snapshots import load_snapshot
 
 SWEEP_FILE = "sweep.json"
 SUMMARY_FILE = "summary.csv"
@@ -102,17 +98,6 @@ FORMAT = "qpcontact-sweep"
 # ------------------------------------------------------------------------------------------
 # The grid
 # ------------------------------------------------------------------------------------------
-def setting_names() -> dict[str, tuple[str, Callable[[str], Any], tuple[Any, ...] | None]]:
-    """Every name a varied setting may be given by (the :class:`~qpcontact.colony.Settings`
-    field, ``n_cells``, or its flag without dashes, ``cells``, ``growth-inertia``) -> (field, the
-    flag's value type, its choices)."""
-    names = {}
-    for flag, field, kind, _, choices in SETTING_FLAGS:
-        for alias in (field, flag[2:], flag[2:].replace("-", "_")):
-            names[alias] = (field, kind, choices)
-    return names
-
-
 def parse_vary(text: str) -> tuple[str, list[str]]:
     """``NAME=V1,V2,...`` -> ``(NAME, [V1, V2, ...])`` (the values as text)."""
     name, equals, values = text.partition("=")
@@ -122,36 +107,29 @@ def parse_vary(text: str) -> tuple[str, list[str]]:
 
 
 def varied_values(name: str, values: Sequence[Any], source: str) -> tuple[str, list[Any]]:
-    """``(field, values)``: the setting a varied name means and its values, converted from text
-    by its flag's type (values from a TOML file are kept as they are; the settings check their
-    types).
+    """``(name, values)``: the setting a varied name means (its one name,
+    :attr:`qpcontact.described.Setting.name`) and its values, read from text as its flag reads
+    them (values from a TOML file are kept as they are; the merge checks them).
 
     Raises:
-        InvalidArgumentError: an unknown name, the seed (``--seeds`` varies it), a value its flag
-            refuses, or no values.
+        InvalidArgumentError: an unknown name, the seed (``--seeds`` varies it), a value the
+            setting refuses, or no values.
     """
-    names = setting_names()
-    if name not in names:
-        raise InvalidArgumentError(f"{source}: unknown setting {name!r} to vary; known: "
-                                   f"{', '.join(f for _, f, *_ in SETTING_FLAGS)}")
-    field, kind, choices = names[name]
-    if field == "seed":
+    s = find_setting(Settings, name)
+    if s is None:
+        raise InvalidArgumentError(f"{source}: unknown setting {name!r} to vary; known: {known_names(Settings)} (by "
+                                   "path table.key, or by flag without the dashes)")
+    if s.name == "seed":
         raise InvalidArgumentError(f"{source}: vary the seed with --seeds (or seeds = [...] in [sweep])")
     if not isinstance(values, (list, tuple)) or not values:
         raise InvalidArgumentError(f"{source}: {name}: expected a non-empty list of values, got {values!r}")
     out = []
     for value in values:
-        if isinstance(value, str) and kind is not str:
-            try:
-                value = kind(value)
-            except (argparse.ArgumentTypeError, ValueError) as exc:
-                raise InvalidArgumentError(f"{source}: {name}={value}: {exc}") from None
-        if choices is not None and value not in choices:
-            raise InvalidArgumentError(f"{source}: {name}={value!r}: not one of {', '.join(map(str, choices))}")
-        if field == "model" and isinstance(value, str) and value:  # the workers may start elsewhere
-            value = str(Path(value).resolve())
-        out.append(value)
-    return field, out
+        try:
+            out.append(parse_text(s, value) if isinstance(value, str) and s.kind is not str else value)
+        except InvalidArgumentError as exc:
+            raise InvalidArgumentError(f"{source}: {name}={value}: {str(exc).split(': ', 1)[1]}") from None
+    return s.name, out
 
 
 def label(value: Any) -> str:
@@ -195,7 +173,8 @@ class Grid:
 
 
 def plan_runs(base: Settings, grid: Grid) -> list[dict[str, Any]]:
-    """Every run of the sweep (``name``, ``varied``, ``settings``), each run's settings checked.
+    """Every run of the sweep (``name``, ``varied``, ``settings`` as tables), each run's settings
+    ``base`` merged with its varied values (:func:`qpcontact.colony.settings.merge`) and checked.
 
     Raises:
         InvalidArgumentError: a combination the settings refuse (naming the run), or two runs of
@@ -209,14 +188,24 @@ def plan_runs(base: Settings, grid: Grid) -> list[dict[str, Any]]:
             raise InvalidArgumentError(f"the grid has two runs named {name!r} ({seen[name]} and {varied}); vary "
                                        "distinct values")
         seen[name] = varied
-        settings = base.updated(varied, f"run {name}")
-        runs.append({"name": name, "varied": varied, "settings": settings.to_dict(), "status": "pending", "error": ""})
+        settings = merge([grid_layer(f"run {name}", varied)], base=base)
+        runs.append({"name": name, "varied": varied, "settings": settings.to_tables(), "status": "pending", "error": ""})
     return runs
 
 
+def grid_layer(source: str, varied: Mapping[str, Any]) -> Layer:
+    """Varied values by name as a layer of the merge."""
+    paths = {}
+    for name, value in varied.items():
+        s = find_setting(Settings, name)
+        assert s is not None, name  # names come from varied_values
+        paths[s.path] = value
+    return Layer(source, paths, "grid")
+
+
 def read_config(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """``(flat settings and run options, the [sweep] table)`` of a configuration file."""
-    values = read_toml(path, tables=("sweep",))
+    """``(the settings' tables, the [sweep] table)`` of a configuration file."""
+    values = read_toml(path)
     table = values.pop("sweep", {})
     if not isinstance(table, dict):
         raise InvalidArgumentError(f"{path}: sweep must be a table ([sweep])")
@@ -227,22 +216,24 @@ def read_config(path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
     return values, table
 
 
-def configure(args: argparse.Namespace) -> tuple[Settings, RunOptions, Grid]:
-    """The base settings, the run options and the grid, later sources winning: the defaults,
-    ``--config`` (its ``[sweep]`` table for the grid), the flags."""
-    settings, options = Settings(), RunOptions()
+def configure(args: argparse.Namespace) -> tuple[Settings, Grid, list[Layer]]:
+    """The base settings, the grid and the layers the settings came from (for
+    :func:`qpcontact.colony.settings.refuse_unused` once the runs are known): later sources
+    winning, the defaults, ``--config`` (its ``[sweep]`` table for the grid), the flags."""
+    layers: list[Layer] = []
     table: dict[str, Any] = {}
     source = "command line"
     if args.config is not None:
         values, table = read_config(args.config)
-        options = updated(options, {k: v for k, v in values.items() if k in RUN_OPTION_NAMES}, str(args.config))
-        settings = settings.updated({k: v for k, v in values.items() if k not in RUN_OPTION_NAMES}, str(args.config))
+        layers.append(file_layer(args.config, values))
         source = f"{args.config} [sweep]"
-    settings = settings.updated(flags_given(args, settings), "command line")
-    if args.snapshot_every is not None:
-        options = updated(options, {"snapshot_every": args.snapshot_every}, "command line")
-    if options.gif:
+    layers.append(flag_layer(args))
+    settings = merge(layers)
+    if settings.output.gif:
         raise InvalidArgumentError("gif: a sweep writes no animations; set gif = false")
+    if settings.output.snapshot_every == 0:
+        raise InvalidArgumentError("snapshot_every: a sweep's run continues from its latest snapshot when its worker "
+                                   "dies; give a number of steps >= 1")
     vary: dict[str, list[Any]] = {}
     table_vary = table.get("vary", {})
     if not isinstance(table_vary, dict):
@@ -253,14 +244,12 @@ def configure(args: argparse.Namespace) -> tuple[Settings, RunOptions, Grid]:
         vary[field] = converted
     seeds = args.seeds or (list(range(1, args.replicates + 1)) if args.replicates else None) or table.get("seeds")
     if seeds is None:
-        seeds = [settings.seed]
+        seeds = [settings.run.seed]
     if not (isinstance(seeds, list) and seeds and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0
                                                       for s in seeds)):
         raise InvalidArgumentError(f"{source}: seeds must be a non-empty list of integers >= 0, got {seeds!r}")
     zip_ = args.zip or bool(table.get("zip", False))
-    if settings.model:  # the workers may start elsewhere: the hook by its absolute path
-        settings = settings.updated({"model": str(Path(settings.model).resolve())}, "command line")
-    return settings, options, Grid(vary, list(seeds), zip_)
+    return settings, Grid(vary, list(seeds), zip_), layers
 
 
 # ------------------------------------------------------------------------------------------
@@ -325,17 +314,18 @@ def attempts_of(folder: Path) -> list[dict[str, Any]]:
     return out
 
 
-def open_folder(path: Path) -> tuple[RunFolder, Any]:
+def open_folder(path: Path, vtk: bool = False) -> tuple[RunFolder, Any]:
     """The run's folder, continued from its latest snapshot if it has one (``(folder, snapshot)``),
-    or started afresh (``(folder, None)``) if it has none or it cannot be continued."""
+    or started afresh (``(folder, None)``) if it has none or it cannot be continued; ``vtk``:
+    ParaView files with each snapshot."""
     latest = RunFolder(path).latest_snapshot() if path.is_dir() else None
     if latest is not None:
         try:
             snapshot = load_snapshot(latest)
-            return RunFolder.resume(path, snapshot, overwrite=True), snapshot
+            return RunFolder.resume(path, snapshot, overwrite=True, vtk=vtk), snapshot
         except QPContactError:
             pass  # a folder that cannot be continued is started again: nothing of it is kept
-    return RunFolder.create(path, overwrite=True), None
+    return RunFolder.create(path, overwrite=True, vtk=vtk), None
 
 
 @contextlib.contextmanager
@@ -358,13 +348,14 @@ def run_lock(folder: Path) -> Iterator[None]:
             fcntl.flock(fh, fcntl.LOCK_UN)
 
 
-def run_task(name: str, values: Mapping[str, Any], folder: str, snapshot_every: int) -> dict[str, Any]:
+def run_task(name: str, values: Mapping[str, Any], folder: str) -> dict[str, Any]:
     """One run of a sweep, in its folder: idempotent (module docstring), one task at a time per
-    run (:func:`run_lock`). Returns its outcome: ``name``, ``status`` (``done``, ``failed``, or
+    run (:func:`run_lock`); ``values``: its settings as tables (:meth:`Settings.to_tables`).
+    Returns its outcome: ``name``, ``status`` (``done``, ``failed``, or
     ``stopped`` by the sweep's stop flag, :func:`stoppable`), ``error``, ``traceback`` and the
     :data:`MEASURES`; it raises only what opening the folder raises."""
     with run_lock(Path(folder)):
-        return _run(name, values, Path(folder), snapshot_every)
+        return _run(name, values, Path(folder))
 
 
 def stoppable(hook: Hook | None, flag: Path) -> Hook:
@@ -381,34 +372,34 @@ def stoppable(hook: Hook | None, flag: Path) -> Hook:
     return checked
 
 
-def _run(name: str, values: Mapping[str, Any], path: Path, snapshot_every: int) -> dict[str, Any]:
+def _run(name: str, values: Mapping[str, Any], path: Path) -> dict[str, Any]:
     finished = read_json(path / RESULT_FILE)
     if isinstance(finished, dict) and finished.get("status") == "done":
         return finished
     _event(name, "started")
     t0 = time.perf_counter()
-    settings = Settings().updated(values, f"run {name}")
-    run_folder, snapshot = open_folder(path)
+    settings = Settings.from_stored(values, f"run {name}")
+    run_folder, snapshot = open_folder(path, vtk=settings.output.vtk)
     start_step = 0 if snapshot is None else max(snapshot.step, 0)
     worker = f"{socket.gethostname()}:{os.getpid()}"
     attempt = {"started": datetime.now(UTC).isoformat(timespec="seconds"), "worker": worker, "pid": os.getpid(),
                "from_step": start_step}
     with (path / ATTEMPTS_FILE).open("a") as fh:
         fh.write(json.dumps(attempt) + "\n")
-    run_folder.write_config({**settings.to_dict(), "snapshot_every": snapshot_every},
+    run_folder.write_config(settings.to_tables(applying=True),
                             f"qpcontact sweep run {name}, {datetime.now(UTC):%Y-%m-%d %H:%M} UTC"
                             + (f"\ncontinued from step {start_step}" if snapshot is not None else ""))
     outcome: dict[str, Any] = {"name": name, "status": "failed", "error": "", "traceback": ""}
     try:
-        hook = stoppable(load_hook(settings.model) if settings.model else None, path.parent.parent / STOP_FILE)
-        run = run_colony(settings, start=snapshot, progress=False, folder=run_folder, snapshot_every=snapshot_every,
-                         hook=hook)
+        hook = stoppable(load_hook(settings.model.hook) if settings.model.hook else None,
+                         path.parent.parent / STOP_FILE)
+        run = run_colony(settings, start=snapshot, progress=False, folder=run_folder, hook=hook)
         if run.interrupted:
             _event(name, "finished")
             return {**outcome, "status": "stopped", "error": f"stopped at step {run.steps}"}
-        draw_pictures(run_folder, settings, run, gif=False)
+        draw_pictures(run_folder, settings, run, gif=False, color=settings.output.color)
         measures = run_measures(run_folder.read_history(), run.colony.cells.axes, run.colony.cells.n, run.colony.time,
-                                settings.dimensions)
+                                settings.run.dimensions)
         error = run.error
         if run.exception is not None and run.exception.__cause__ is not None:  # a model hook's own traceback
             outcome["traceback"] = "".join(traceback.format_exception(run.exception.__cause__))
@@ -444,10 +435,9 @@ class Sweep:
         return self.out / "runs" / run["name"]
 
     @classmethod
-    def new(cls, out: Path, runs: list[dict[str, Any]], base: Settings, grid: Grid, snapshot_every: int) -> Sweep:
-        document = {"format": FORMAT, "version": 1, "created": datetime.now(UTC).isoformat(timespec="seconds"),
-                    "base": base.to_dict(), "vary": grid.vary, "seeds": grid.seeds, "zip": grid.zip,
-                    "snapshot_every": snapshot_every, "runs": runs}
+    def new(cls, out: Path, runs: list[dict[str, Any]], base: Settings, grid: Grid) -> Sweep:
+        document = {"format": FORMAT, "version": 2, "created": datetime.now(UTC).isoformat(timespec="seconds"),
+                    "base": base.to_tables(), "vary": grid.vary, "seeds": grid.seeds, "zip": grid.zip, "runs": runs}
         return cls(out, document)
 
     @classmethod
@@ -462,8 +452,11 @@ class Sweep:
             raise OutputFolderError(f"{out}: holds no sweep to resume ({SWEEP_FILE} is missing or unreadable)")
         if not isinstance(document, dict) or document.get("format") != FORMAT or not isinstance(document.get("runs"), list):
             raise OutputFolderError(f"{out / SWEEP_FILE}: not a qpcontact sweep")
-        for run in document["runs"]:
-            Settings().updated(run["settings"], f"{out / SWEEP_FILE}: run {run['name']}")
+        for run in document["runs"]:  # a sweep of version 1 stored flat settings, snapshot_every apart
+            values = run["settings"]
+            if "snapshot_every" in document and not any(isinstance(v, Mapping) for v in values.values()):
+                values = {**values, "snapshot_every": document["snapshot_every"]}
+            run["settings"] = Settings.from_stored(values, f"{out / SWEEP_FILE}: run {run['name']}").to_tables()
         return cls(out, document)
 
     def save(self) -> Path:
@@ -495,7 +488,7 @@ class Sweep:
 
     # -- summary and picture ------------------------------------------------------------------
     def summary_columns(self) -> tuple[str, ...]:
-        return ("name", "status", *self.varied, *MEASURES, "error")
+        return ("name", "status", *self.varied, "step", "growth", *MEASURES, "error")
 
     def write_summary(self) -> Path:
         rows = []
@@ -503,7 +496,9 @@ class Sweep:
             measures = dict(run.get("measures", {}))
             measures["attempts"] = len(attempts_of(self.folder(run)))
             error = " ".join(str(run.get("error", "")).split())  # one line per run
-            rows.append({"name": run["name"], "status": run["status"], **run["varied"], **measures, "error": error})
+            ran = Settings.from_stored(run["settings"], run["name"])
+            rows.append({"name": run["name"], "status": run["status"], **run["varied"], "step": ran.describe_step(),
+                         "growth": ran.describe_growth(), **measures, "error": error})
         path = self.out / SUMMARY_FILE
         write_csv(rows, path, self.summary_columns(), digits=6)
         return path
@@ -583,8 +578,7 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
     def started(run: Mapping[str, Any]) -> bool:
         return run["name"] in running or len(attempts_of(sweep.folder(run))) > starts_before[run["name"]]
 
-    snapshot_every = int(sweep.document["snapshot_every"])
-    pending = {client.submit(run_task, run["name"], run["settings"], str(sweep.folder(run)), snapshot_every,
+    pending = {client.submit(run_task, run["name"], run["settings"], str(sweep.folder(run)),
                              key=f"sweep-{run['name']}-{os.urandom(4).hex()}", pure=False): run for run in runs}
     bar = tqdm(total=len(sweep.runs), initial=len(sweep.runs) - len(runs), unit="run", desc="sweep",
                disable=not progress, file=sys.stderr, dynamic_ncols=True)
@@ -686,19 +680,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out: runs/NAME/ (each run's snapshots, history, pictures, as qpcontact simulate), sweep.json (the runs and "
         "their status), summary.csv (one row per run) and ensemble.png (mean and range across seeds against time). "
         "Ctrl-C or a lost worker loses no finished run: --resume continues, redoing only what is not done.\n\n"
-        "Example: qpcontact sweep --cells 500 --seeds 1,2,3 --vary growth_inertia=100,1000 --vary "
-        "overlap_tolerance=0.01,0.02")
+        "Example: qpcontact sweep --cells 500 --seeds 1,2,3 --vary growth_inertia_ratio=100,1000 --vary "
+        "position_overlap_tolerance=0.01,0.02")
     grid = parser.add_argument_group("the grid")
     grid.add_argument("--config", type=Path, metavar="FILE",
-                      help="settings as name = value lines (as in the config.toml of qpcontact simulate) and a [sweep] "
-                           "table: seeds = [1, 2], zip = false, [sweep.vary] name = [values]; flags override it")
+                      help="settings in the tables of the config.toml of qpcontact simulate ([model], [run], ...) and "
+                           "a [sweep] table: seeds = [1, 2], zip = false, [sweep.vary] name = [values]; flags override "
+                           "it")
     seeds = grid.add_mutually_exclusive_group()
     seeds.add_argument("--seeds", type=comma_list(non_negative_int), metavar="LIST",
                        help="comma-separated random seeds, one run each per combination (default: --seed's)")
     seeds.add_argument("--replicates", type=positive_int, metavar="N", help="the seeds 1, 2, ..., N")
     grid.add_argument("--vary", type=parse_vary, action="append", metavar="NAME=LIST",
-                      help="a setting and its comma-separated values (repeat for several; names as in config.toml or "
-                           "the flags without dashes: growth_inertia=100,1000, cells=500,2000, solver=clarabel,osqp)")
+                      help="a setting and its comma-separated values (repeat for several; a setting is named by its "
+                           "flag without the dashes, or table.key: growth_inertia_ratio=100,1000, cells=500,2000, "
+                           "position_solver=ipm,mprgp, velocity.tolerance=1e-4,1e-6)")
     grid.add_argument("--zip", action="store_true",
                       help="take the --vary lists side by side (a list of runs; equal lengths) instead of every "
                            "combination")
@@ -706,25 +702,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     run.add_argument("--resume", action="store_true",
                      help="continue the sweep in --out: run what is not done, continue the runs that were cut short "
                           "from their latest snapshot (no grid or setting flags then)")
-    run.add_argument("--out", type=Path, default=Path("sweep-out"), metavar="FOLDER",
+    run.add_argument("--out", type=output_folder, default=Path("sweep-out"), metavar="FOLDER",
                      help="output folder (default: ./sweep-out); checked before anything starts")
     run.add_argument("--overwrite", action="store_true",
                      help="replace the sweep already in --out (its files are removed first; default: refuse)")
-    run.add_argument("--snapshot-every", dest="snapshot_every", type=positive_int, default=None, metavar="N",
-                     help="each run saves a snapshot every N steps, from which it continues if its worker dies "
-                          "(default: 100)")
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     cluster.add_cluster_arguments(parser, local_by_default=True)
-    add_setting_flags(parser.add_argument_group("settings of every run (as qpcontact simulate; a varied one is "
-                                                "replaced)"))
+    add_setting_flags(parser, " (every run's, as in qpcontact simulate; a varied one is replaced)")
 
 
 def _grid_flags(args: argparse.Namespace) -> list[str]:
-    flag_of = {field: flag for flag, field, *_ in SETTING_FLAGS}
-    given = [flag_of.get(name, name) for name in flags_given(args, Settings())]
+    flag_of = {s.path: s.flag for s in settings_of(Settings)}
+    given = [flag_of[path] for path in flag_layer(args).values]
     for flag, value in (("--config", args.config), ("--seeds", args.seeds), ("--replicates", args.replicates),
-                        ("--vary", args.vary), ("--zip", args.zip), ("--snapshot-every", args.snapshot_every),
-                        ("--overwrite", args.overwrite)):
+                        ("--vary", args.vary), ("--zip", args.zip), ("--overwrite", args.overwrite)):
         if value:
             given.append(flag)
     return given
@@ -744,16 +735,18 @@ def prepare(args: argparse.Namespace) -> tuple[Sweep, list[dict[str, Any]]]:
         prepare_folder(out)
         (out / STOP_FILE).unlink(missing_ok=True)  # left by a sweep that could not remove it
         return sweep, sweep.to_do()
-    base, options, grid = configure(args)
+    base, grid, layers = configure(args)
     runs = plan_runs(base, grid)
-    for model in sorted({run["settings"]["model"] for run in runs} - {""}):
-        load_hook(model)
+    refuse_unused([Settings.from_stored(run["settings"], run["name"]) for run in runs],
+                  [*layers, grid_layer("--vary", {name: values[0] for name, values in grid.vary.items()})])
+    for hook in sorted({run["settings"]["model"]["hook"] for run in runs} - {""}):
+        load_hook(hook)
     if (out / SWEEP_FILE).exists() and not args.overwrite:
         raise OutputFolderError(f"{args.out} holds a sweep ({SWEEP_FILE}); continue it with --resume, or pass "
                                 "--overwrite to replace it")
     prepare_folder(out, OUTPUTS, overwrite=args.overwrite)
     (out / STOP_FILE).unlink(missing_ok=True)
-    sweep = Sweep.new(out, runs, base, grid, options.snapshot_every)
+    sweep = Sweep.new(out, runs, base, grid)
     sweep.save()
     return sweep, list(sweep.runs)
 

@@ -2,9 +2,10 @@
 and as a sweep on a local Dask cluster, then a sweep on a scheduler and workers started as
 separate processes with one worker killed in the middle of a run.
 
-``python -m qpcontact.studies.sweep_benchmark [--cells 2000] [--runs 8] [--workers 2] [--out DIR]``
+``python benchmarks/sweep_benchmark.py [--cells 2000] [--runs 8] [--workers 2] [--out DIR]`` (a developer's
+tool, from the repository root; not installed with the package)
 
-1. *One after the other*: :func:`qpcontact.studies.sweep.run_task` for seeds 1..runs in this
+1. *One after the other*: :func:`qpcontact.colony.sweep.run_task` for seeds 1..runs in this
    process (the work of each task, without Dask): wall time of each and in total.
 2. *Sweep*: ``qpcontact sweep`` of the same runs on a ``LocalCluster`` of ``--workers`` worker
    processes (cluster start included): wall time, speed-up over 1, and the overhead per task,
@@ -35,12 +36,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..arguments import positive_int, run_standalone
-from ..colony.runs import RunFolder
-from ..colony.simulate import Settings
-from ..errors import OutputFolderError
-from ..outputs import prepare_folder, write_text
-from . import sweep
+from qpcontact.arguments import positive_int, run_standalone
+from qpcontact.colony import sweep
+from qpcontact.colony.runs import RunFolder
+from qpcontact.colony.simulate import Settings
+from qpcontact.errors import OutputFolderError
+from qpcontact.outputs import prepare_folder, write_text
 
 
 def one_after_the_other(cells: int, runs: int, out: Path) -> dict[str, Any]:
@@ -48,8 +49,8 @@ def one_after_the_other(cells: int, runs: int, out: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     for seed in range(1, runs + 1):
         t = time.perf_counter()
-        outcome = sweep.run_task(f"seed-{seed}", Settings(n_cells=cells, seed=seed).to_dict(),
-                                 str(out / "runs" / f"seed-{seed}"), 100)
+        outcome = sweep.run_task(f"seed-{seed}", Settings().updated({"cells": cells, "seed": seed}).to_tables(),
+                                 str(out / "runs" / f"seed-{seed}"))
         if outcome["status"] != "done":
             raise RuntimeError(f"run seed-{seed} failed: {outcome['error']}")
         seconds.append(time.perf_counter() - t)
@@ -198,7 +199,7 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return run_standalone("python -m qpcontact.studies.sweep_benchmark", add_arguments, run_command, argv,
+    return run_standalone("python benchmarks/sweep_benchmark.py", add_arguments, run_command, argv,
                           description=__doc__.split("\n\n")[0] if __doc__ else None)
 
 

@@ -1,5 +1,6 @@
-"""Dask for the studies: a client on a local cluster or on an existing one, and tasks that may
-start child processes.
+"""Dask for the commands (``qpcontact sweep``, and ``compare``/``stability`` with
+``--scheduler``/``--workers``): a client on a local cluster or on an existing one, and tasks
+that may start child processes.
 
 - :func:`add_cluster_arguments`: ``--scheduler ADDRESS`` (an existing Dask cluster) and
   ``--workers N`` (a :class:`distributed.LocalCluster` of N single-threaded worker processes on
@@ -14,7 +15,8 @@ start child processes.
   inside the task as it runs in a local study.
 
 Dask is the optional extra ``qpcontact[sweep]`` (``dask[distributed]``); :func:`require_distributed`
-says so in one line when it is missing. Nothing here is imported by ``import qpcontact``.
+says so in one line when it is missing. Nothing here is imported by ``import qpcontact``; Dask itself only when a client is opened.
+A top-level helper like :mod:`qpcontact.outputs` (the colony wing's sweep and the studies use it).
 """
 
 from __future__ import annotations
@@ -28,8 +30,8 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..arguments import positive_int
-from ..errors import InvalidArgumentError
+from .arguments import positive_int
+from .errors import InvalidArgumentError
 
 #: How to install Dask for qpcontact.
 INSTALL_HINT = "pip install 'qpcontact[sweep]'"

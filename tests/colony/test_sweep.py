@@ -1,4 +1,4 @@
-"""qpcontact sweep (qpcontact.studies.sweep) and the Dask helpers (qpcontact.studies.cluster): the
+"""qpcontact sweep (qpcontact.colony.sweep) and the Dask helpers (qpcontact.cluster): the
 grid and its checks before anything starts, a small sweep on a 2-worker local cluster, failed runs
 reported by name, a stopped sweep resumed, a killed worker, and compare/stability on Dask with
 their time limits kept. The runs are tiny (10-60 cells, a few seconds each)."""
@@ -17,11 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qpcontact import cli
+from qpcontact import cli, cluster
+from qpcontact.colony import sweep
 from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
 from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.errors import InvalidArgumentError
-from qpcontact.studies import cluster, harness, sweep
+from qpcontact.studies import harness
 from tests.helpers import default_signals, gate_model, wait_for
 
 distributed = pytest.importorskip("distributed")
@@ -53,46 +54,58 @@ def scheduler():
 # The grid, checked before anything starts
 # ------------------------------------------------------------------------------------------
 def test_the_grid_is_seeds_times_the_product_of_the_varied_lists_or_their_zip():
-    grid = sweep.Grid({"growth_inertia": [100.0, 1000.0], "overlap_tolerance": [0.01, 0.02]}, [1, 2])
-    runs = sweep.plan_runs(Settings(n_cells=10), grid)
+    grid = sweep.Grid({"growth_inertia_ratio": [100.0, 1000.0], "position_overlap_tolerance": [0.01, 0.02]}, [1, 2])
+    runs = sweep.plan_runs(Settings().updated({"cells": 10}), grid)
     assert len(runs) == 8 and len({r["name"] for r in runs}) == 8
-    assert runs[0]["name"] == "growth_inertia-100__overlap_tolerance-0.01__seed-1"
-    assert runs[0]["settings"]["n_cells"] == 10 and runs[-1]["settings"]["seed"] == 2
-    assert runs[-1]["varied"] == {"growth_inertia": 1000.0, "overlap_tolerance": 0.02, "seed": 2}
-    zipped = sweep.plan_runs(Settings(), sweep.Grid({"n_cells": [10, 20], "dimensions": [2, 3]}, [5], zip=True))
-    assert [r["name"] for r in zipped] == ["n_cells-10__dimensions-2__seed-5", "n_cells-20__dimensions-3__seed-5"]
+    assert runs[0]["name"] == "growth_inertia_ratio-100__position_overlap_tolerance-0.01__seed-1"
+    assert runs[0]["settings"]["run"]["cells"] == 10 and runs[-1]["settings"]["run"]["seed"] == 2
+    assert runs[-1]["settings"]["position"]["overlap_tolerance"] == 0.02
+    assert runs[-1]["varied"] == {"growth_inertia_ratio": 1000.0, "position_overlap_tolerance": 0.02, "seed": 2}
+    zipped = sweep.plan_runs(Settings(), sweep.Grid({"cells": [10, 20], "dimensions": [2, 3]}, [5], zip=True))
+    assert [r["name"] for r in zipped] == ["cells-10__dimensions-2__seed-5", "cells-20__dimensions-3__seed-5"]
     assert [r["name"] for r in sweep.plan_runs(Settings(), sweep.Grid({}, [3, 4]))] == ["seed-3", "seed-4"]
 
 
 def test_the_grid_from_a_configuration_file_with_flags_overriding_it(tmp_path):
     config = tmp_path / "sweep.toml"
-    config.write_text('n_cells = 12\nsolver = "osqp"\nsnapshot_every = 7\n\n[sweep]\nseeds = [4, 5]\n\n'
-                      '[sweep.vary]\ngrowth_inertia = [100, 1000]\novershoot = []\n')
+    config.write_text('[run]\ncells = 12\n[position]\nsolver = "mprgp"\n[output]\nsnapshot_every = 7\n\n'
+                      '[sweep]\nseeds = [4, 5]\n\n[sweep.vary]\ngrowth_inertia_ratio = [100, 1000]\novershoot = []\n')
     args = cli.command_parser(cli.build_parser("sweep"), "sweep").parse_args(["--config", str(config)])
     with pytest.raises(InvalidArgumentError, match="unknown setting 'overshoot'"):
         sweep.configure(args)
     config.write_text(config.read_text().replace("overshoot = []\n", ""))
-    base, options, grid = sweep.configure(args)
-    assert (base.n_cells, base.solver, options.snapshot_every) == (12, "osqp", 7)
-    assert grid.vary == {"growth_inertia": [100, 1000]} and grid.seeds == [4, 5]
+    base, grid, _ = sweep.configure(args)
+    assert (base.run.cells, base.position.solver, base.output.snapshot_every) == (12, "mprgp", 7)
+    assert grid.vary == {"growth_inertia_ratio": [100, 1000]} and grid.seeds == [4, 5]
     args = cli.command_parser(cli.build_parser("sweep"), "sweep").parse_args(
-        ["--config", str(config), "--cells", "20", "--seeds", "9", "--vary", "growth-inertia=5", "--snapshot-every", "3"])
-    base, options, grid = sweep.configure(args)
-    assert (base.n_cells, options.snapshot_every, grid.seeds, grid.vary) == (20, 3, [9], {"growth_inertia": [5.0]})
+        ["--config", str(config), "--cells", "20", "--seeds", "9", "--vary", "growth-inertia-ratio=5",
+         "--snapshot-every", "3"])
+    base, grid, _ = sweep.configure(args)
+    assert (base.run.cells, base.output.snapshot_every, grid.seeds, grid.vary) == (20, 3, [9],
+                                                                                   {"growth_inertia_ratio": [5.0]})
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--vary", "growth_inertia=100,-1"], "growth_inertia=-1: must be a finite number > 0"),
+    (["--vary", "growth_inertia_ratio=100,-1"], "growth_inertia_ratio=-1: expected a number > 0, got -1.0"),
     (["--vary", "nosuch=1,2"], "unknown setting 'nosuch' to vary"),
-    (["--vary", "dimensions=2,4"], "dimensions=4: not one of 2, 3"),
-    (["--vary", "solver=clarabel,nosuch"], "nosuch"),
+    (["--vary", "dimensions=2,4"], "dimensions=4: expected one of 2, 3, got 4"),
+    (["--vary", "position_solver=ipm,nosuch"], "nosuch"),
     (["--vary", "seed=1,2"], "vary the seed with --seeds"),
     (["--vary", "cells=10,20", "--vary", "dimensions=2", "--zip"], "the varied lists must have the same length"),
-    (["--vary", "step=position,velocity", "--vary", "dynamics=overdamped,inertial"],
-     "run step-position__dynamics-inertial__seed-1: dynamics: the position step is overdamped"),
-    (["--vary", "growth_inertia=100,100"], "two runs named 'growth_inertia-100__seed-1'"),
-    (["--vary", "model=nosuch.py"], "nosuch.py"),
+    (["--vary", "velocity_solver=clarabel,osqp"],
+     "--vary: velocity_solver: a setting of the velocity step; this run takes position steps"),
+    (["--velocity-tolerance", "1e-4"], "command line: --velocity-tolerance: a setting of the velocity step"),
+    (["--vary", "growth_inertia_ratio=100,100"], "two runs named 'growth_inertia_ratio-100__seed-1'"),
+    (["--vary", "hook=nosuch.py"], "nosuch.py"),
+    (["--snapshot-every", "0"], "snapshot_every: a sweep's run continues from its latest snapshot"),
+    (["--solver", "osqp"], "--solver: each step has its own: --position-solver"),
     (["--resume"], "holds no sweep to resume"),
+    (["--vary", "stall_pressure=10,50"], "--vary: stall_pressure: used by pressure-dependent growth only"),
+    (["--stall-pressure", "10"], "command line: --stall-pressure: used by pressure-dependent growth only"),
+    (["--vary", "pressure_growth=off,quadratic"],
+     "run pressure_growth-quadratic__seed-1: pressure_growth: expected one of off, linear, exponential, got "
+     "'quadratic'"),
+    (["--vary", "color=orientation,red"], "run color-red__seed-1: color: expected one of orientation, pressure, got 'red'"),
 ])
 def test_a_bad_setting_is_rejected_before_any_task_starts(argv, message, tmp_path, capsys, monkeypatch):
     def no_cluster(*args, **kwargs):
@@ -104,6 +117,32 @@ def test_a_bad_setting_is_rejected_before_any_task_starts(argv, message, tmp_pat
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("qpcontact sweep: ") and message in err, err
     assert not out.exists()
+
+
+def test_a_sweep_of_pressure_growth_off_and_on_is_planned_with_each_runs_law(tmp_path, monkeypatch):
+    """--vary pressure_growth=off,linear with --stall-pressure: the stall pressure applies to the
+    linear runs, so it is not refused; each run's settings carry its law, and summary.csv names
+    the growth that ran next to the step (checked on the planned sweep: no cluster started)."""
+    def no_cluster(*args, **kwargs):
+        raise AssertionError("a cluster was started")
+
+    monkeypatch.setattr(cluster, "open_client", no_cluster)
+    out = tmp_path / "out"
+    args = cli.command_parser(cli.build_parser("sweep"), "sweep").parse_args(
+        ["--cells", "5", "--seeds", "1,2", "--vary", "pressure_growth=off,linear", "--stall-pressure", "40",
+         "--color", "pressure", "--out", str(out)])
+    planned, runs = sweep.prepare(args)
+    assert [r["name"] for r in runs] == ["pressure_growth-off__seed-1", "pressure_growth-off__seed-2",
+                                         "pressure_growth-linear__seed-1", "pressure_growth-linear__seed-2"]
+    for run in runs:
+        model = run["settings"]["model"]
+        assert (model["pressure_growth"], model["stall_pressure"]) == (run["varied"]["pressure_growth"], 40.0)
+        assert run["settings"]["output"]["color"] == "pressure"
+    planned.write_summary()
+    summary = read_summary(out)
+    assert summary["pressure_growth-off__seed-1"]["growth"] == "pressure growth off"
+    assert summary["pressure_growth-linear__seed-2"]["growth"] == "pressure growth linear, stall pressure 40 F/µm"
+    assert summary["pressure_growth-linear__seed-2"]["pressure_growth"] == "linear"
 
 
 def test_sweep_without_dask_says_which_extra_to_install(tmp_path, capsys, monkeypatch):
@@ -134,22 +173,23 @@ def test_nematic_order():
 # One run's task: idempotent, continued from its folder
 # ------------------------------------------------------------------------------------------
 def test_a_run_task_continues_a_cut_run_from_its_snapshot_exactly_and_is_done_once(tmp_path):
-    values = Settings(n_cells=12, seed=3).to_dict()
-    whole = sweep.run_task("whole", values, str(tmp_path / "whole"), 5)
+    settings = Settings().updated({"cells": 12, "seed": 3, "snapshot_every": 5})
+    values = settings.to_tables()
+    whole = sweep.run_task("whole", values, str(tmp_path / "whole"))
     assert whole["status"] == "done" and whole["attempts"] == 1 and whole["cells"] >= 12
     # A run cut short: snapshots to step 15, history rows beyond it (a worker killed at step 18).
     cut = tmp_path / "cut"
     folder = RunFolder.create(cut)
-    run_colony(Settings(**{**values, "max_steps": 18}), progress=False, folder=folder, snapshot_every=5)
+    run_colony(settings.updated({"max_steps": 18}), progress=False, folder=folder)
     (cut / "snapshots" / "step_000018.npz").unlink()
-    outcome = sweep.run_task("cut", values, str(cut), 5)
+    outcome = sweep.run_task("cut", values, str(cut))
     assert outcome["status"] == "done" and [a["from_step"] for a in sweep.attempts_of(cut)] == [15]
     ours, theirs = RunFolder(cut).read_history(), RunFolder(tmp_path / "whole").read_history()
     for name in set(HISTORY_FIELDS) - set(TIMING_FIELDS):
         np.testing.assert_array_equal(ours[name], theirs[name], err_msg=name)
     assert {k: outcome[k] for k in ("cells", "steps", "largest_overlap", "order")} == \
         {k: whole[k] for k in ("cells", "steps", "largest_overlap", "order")}
-    assert sweep.run_task("cut", values, str(cut), 5) == json.loads((cut / sweep.RESULT_FILE).read_text())
+    assert sweep.run_task("cut", values, str(cut)) == json.loads((cut / sweep.RESULT_FILE).read_text())
     assert len(sweep.attempts_of(cut)) == 1  # done: not started again
 
 
@@ -158,14 +198,14 @@ def test_a_run_task_continues_a_cut_run_from_its_snapshot_exactly_and_is_done_on
 # ------------------------------------------------------------------------------------------
 def test_a_small_sweep_on_a_two_worker_local_cluster(tmp_path, capsys):
     out = tmp_path / "sweep"
-    code = sweep.main(["--cells", "10", "--seeds", "1,2", "--vary", "growth_inertia=100,1000", "--workers", "2",
+    code = sweep.main(["--cells", "10", "--seeds", "1,2", "--vary", "growth_inertia_ratio=100,1000", "--workers", "2",
                        "--snapshot-every", "10", "--quiet", "--out", str(out)])
     printed = capsys.readouterr().out
     assert code == 0, printed
     assert "4 runs: 4 done, 0 failed, 0 not finished" in printed
     summary = read_summary(out)
-    names = ["growth_inertia-100__seed-1", "growth_inertia-100__seed-2", "growth_inertia-1000__seed-1",
-             "growth_inertia-1000__seed-2"]
+    names = ["growth_inertia_ratio-100__seed-1", "growth_inertia_ratio-100__seed-2", "growth_inertia_ratio-1000__seed-1",
+             "growth_inertia_ratio-1000__seed-2"]
     assert list(summary) == names
     assert tuple(next(iter(summary.values()))) == sweep.Sweep.load(out).summary_columns()
     for name, row in summary.items():
@@ -174,7 +214,8 @@ def test_a_small_sweep_on_a_two_worker_local_cluster(tmp_path, capsys):
         folder = out / "runs" / name
         assert {"config.toml", "history.csv", "colony.png", "history.png", "result.json"} <= {p.name for p in folder.iterdir()}
         assert RunFolder(folder).latest_snapshot() is not None
-        assert f"growth_inertia = {float(row['growth_inertia'])!r}" in (folder / "config.toml").read_text()
+        assert f"growth_inertia_ratio = {float(row['growth_inertia_ratio'])!r}" in (folder / "config.toml").read_text()
+        assert row["step"] == "position step, ipm at tolerance 0.001, overlap ≤ 0.01"  # what ran
     assert len({row["worker"] for row in summary.values()}) == 2  # both workers ran runs
     assert (out / sweep.ENSEMBLE_FILE).stat().st_size > 10_000
     assert all(run["status"] == "done" for run in json.loads((out / sweep.SWEEP_FILE).read_text())["runs"])
@@ -185,19 +226,19 @@ def test_failed_runs_are_reported_by_name_with_their_error_and_resume_redoes_onl
     (tmp_path / "bad.py").write_text("def hook(colony, step):\n    if step == 3:\n"
                                      "        raise ValueError('the model broke at step 3')\n")
     out = tmp_path / "sweep"
-    argv = ["--cells", "8", "--seeds", "1,2", "--vary", f"model={tmp_path / 'good.py'},{tmp_path / 'bad.py'}",
+    argv = ["--cells", "8", "--seeds", "1,2", "--vary", f"hook={tmp_path / 'good.py'},{tmp_path / 'bad.py'}",
             "--scheduler", scheduler, "--quiet", "--out", str(out)]
     assert sweep.main(argv) == 1
     printed, err = capsys.readouterr()
     assert "4 runs: 2 done, 2 failed, 0 not finished" in printed
     for seed in (1, 2):
-        assert f"failed: model-bad.py__seed-{seed}: step 3 (t = " in printed
-        assert "the model broke at step 3" in printed.split(f"model-bad.py__seed-{seed}")[1].splitlines()[0]
+        assert f"failed: hook-bad.py__seed-{seed}: step 3 (t = " in printed
+        assert "the model broke at step 3" in printed.split(f"hook-bad.py__seed-{seed}")[1].splitlines()[0]
     assert "2 runs failed" in err
     summary = read_summary(out)
-    assert summary["model-bad.py__seed-1"]["status"] == "failed" and "the model broke" in summary["model-bad.py__seed-1"]["error"]
+    assert summary["hook-bad.py__seed-1"]["status"] == "failed" and "the model broke" in summary["hook-bad.py__seed-1"]["error"]
     runs = {r["name"]: r for r in json.loads((out / sweep.SWEEP_FILE).read_text())["runs"]}
-    assert "ValueError: the model broke at step 3" in runs["model-bad.py__seed-2"]["traceback"]
+    assert "ValueError: the model broke at step 3" in runs["hook-bad.py__seed-2"]["traceback"]
     # --resume runs the failed ones again (they fail again), not the done ones.
     assert sweep.main(["--resume", "--scheduler", scheduler, "--quiet", "--out", str(out)]) == 1
     assert "sweep of 4 runs into" in (err := capsys.readouterr().err) and "; 2 to do" in err
@@ -221,7 +262,7 @@ def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_pa
     gates.mkdir()
     gate = gate_model(gates, 8, stop_flag=out / sweep.STOP_FILE, skip_first=True)
     process = _sweep_process(["--cells", "150", "--seeds", "1,2,3", "--snapshot-every", "5", "--workers", "1",
-                              "--model", str(gate), "--out", str(out)], tmp_path / "first.log")
+                              "--hook", str(gate), "--out", str(out)], tmp_path / "first.log")
     try:
         wait_for(lambda: (gates / "held").exists() or process.poll() is not None, "the second run held", PATIENCE)
         assert process.poll() is None, (tmp_path / "first.log").read_text()
@@ -286,7 +327,7 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
         gates = tmp_path / "gates"
         gates.mkdir()
         gate = gate_model(gates, 8)
-        client = _sweep_process(["--cells", "150", "--seeds", "1,2,3", "--snapshot-every", "5", "--model", str(gate),
+        client = _sweep_process(["--cells", "150", "--seeds", "1,2,3", "--snapshot-every", "5", "--hook", str(gate),
                                  "--scheduler", str(scheduler_file), "--out", str(out)], logs / "sweep.log")
         processes.append(client)
         pids = {w.pid: w for w in workers}
@@ -311,8 +352,8 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
         else:
             assert len(starts) == 1, (name, starts)
     # The continued run is the uninterrupted run.
-    whole = sweep.run_task("whole", Settings(n_cells=150, seed=int(victim.split("-")[1])).to_dict(),
-                           str(tmp_path / "whole"), 5)
+    whole = sweep.run_task("whole", Settings().updated({"cells": 150, "seed": int(victim.split("-")[1]),
+                                                        "snapshot_every": 5}).to_tables(), str(tmp_path / "whole"))
     ours, theirs = RunFolder(out / "runs" / victim).read_history(), RunFolder(tmp_path / "whole").read_history()
     assert ours["max_overlap"] == theirs["max_overlap"] and ours["cells"] == theirs["cells"]
     assert int(summary[victim]["cells"]) == whole["cells"]
@@ -327,8 +368,8 @@ def test_a_run_folder_is_locked_while_its_task_runs_and_freed_when_it_dies(tmp_p
 
     folder = tmp_path / "run"
     gate = gate_model(tmp_path, 8)
-    values = Settings(n_cells=60, seed=2, model=str(gate)).to_dict()
-    code = (f"from qpcontact.studies import sweep; sweep.run_task('r', {values!r}, {str(folder)!r}, 5)")
+    values = Settings().updated({"cells": 60, "seed": 2, "hook": str(gate), "snapshot_every": 5}).to_tables()
+    code = (f"from qpcontact.colony import sweep; sweep.run_task('r', {values!r}, {str(folder)!r})")
     first = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.DEVNULL,
                              stderr=subprocess.PIPE, text=True)
     try:
@@ -346,7 +387,7 @@ def test_a_run_folder_is_locked_while_its_task_runs_and_freed_when_it_dies(tmp_p
         if first.poll() is None:
             first.kill()
             first.wait()
-    outcome = sweep.run_task("r", values, str(folder), 5)
+    outcome = sweep.run_task("r", values, str(folder))
     assert outcome["status"] == "done" and outcome["attempts"] == 2
     assert [a["from_step"] for a in sweep.attempts_of(folder)] == [0, 5]
 

@@ -1,0 +1,146 @@
+"""A sparse Cholesky factorization of ``diag(d) + Aᵀ diag(w) A`` for a fixed pattern of ``A``.
+
+The interior-point solver (:mod:`qpcontact.solvers.ipm`) factorizes such a matrix once per
+iteration, with new weights ``w`` and ``d`` each time and the same ``A``. So everything that
+depends only on the pattern is done once (:class:`GramMatrix`): every product ``A_ki A_kj``
+(``i ≥ j``, same row ``k``) is listed with the place of entry ``(i, j)`` in the lower triangle,
+so a refill is one ``np.bincount``; the fill-reducing ordering and CHOLMOD's symbolic analysis
+are computed once; each iteration only refills the values and runs the numeric factorization.
+
+The factorization is CHOLMOD's supernodal Cholesky, bundled with cvxopt (dense BLAS kernels on
+the supernodes: 5× the simplicial LDLᵀ of qdldl on a grown colony of 10⁴ cells,
+docs/performance.md). The ordering is METIS's nested dissection (through pymetis) when pymetis
+is installed, else CHOLMOD's own (AMD): on grown colonies nested dissection makes the factor
+25 % cheaper in 2D and 3D (docs/model-notes.md, "A step that scales"). cvxopt's CHOLMOD is
+built without METIS, hence pymetis.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import cvxopt
+import numpy as np
+import scipy.sparse as sp
+from cvxopt import cholmod
+
+pymetis: Any
+try:  # optional: the fill-reducing ordering falls back to CHOLMOD's AMD
+    import pymetis
+except ImportError:  # pragma: no cover - depends on the installation
+    pymetis = None
+
+#: Below this many unknowns the ordering is CHOLMOD's (AMD): nested dissection pays only for
+#: large matrices, and METIS is not free (0.1–0.2 s at 10⁴ cells).
+METIS_SIZE = 2000
+
+
+def ordering_name() -> str:
+    """``"metis"`` when pymetis is installed (nested dissection for large matrices), else ``"amd"``."""
+    return "metis" if pymetis is not None else "amd"
+
+
+def _nested_dissection(pattern: sp.csc_matrix) -> np.ndarray | None:
+    """A fill-reducing permutation of the symmetric ``pattern`` (METIS), or None (use AMD)."""
+    if pymetis is None or pattern.shape[0] < METIS_SIZE:
+        return None
+    graph = (pattern + pattern.T).tocsr()
+    graph.setdiag(0)
+    graph.eliminate_zeros()
+    permutation, _ = pymetis.nested_dissection(adjacency=pymetis.CSRAdjacency(graph.indptr, graph.indices))
+    return np.asarray(permutation, dtype=np.int64)
+
+
+class GramMatrix:
+    """``diag(d) + Aᵀ diag(w) A`` (n × n, for a K × n sparse ``A``) with the pattern of ``A``
+    fixed, refilled for each ``w > 0``, ``d > 0`` and factorized (module docstring).
+
+    Memory: 36 bytes per product; a 2D colony has about 36 products per contact row, a 3D one
+    about 78."""
+
+    def __init__(self, matrix: sp.spmatrix) -> None:
+        csr = sp.csr_matrix(matrix)
+        csr.sum_duplicates()
+        csr.sort_indices()
+        k, n = csr.shape
+        counts = np.diff(csr.indptr)
+        # The pairs (i ≥ j) of each row, generated for all rows with the same number of entries
+        # at once (a few distinct counts: a loop over counts, not over rows).
+        firsts, seconds, rows = [], [], []
+        for m in np.unique(counts[counts > 0]):
+            of = np.flatnonzero(counts == m)
+            i, j = np.tril_indices(int(m))
+            start = csr.indptr[of][:, None]
+            firsts.append((start + i).ravel())
+            seconds.append((start + j).ravel())
+            rows.append(np.repeat(of, i.size))
+        first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
+        second = np.concatenate(seconds) if seconds else np.zeros(0, dtype=np.int64)
+        column_i, column_j = csr.indices[first], csr.indices[second]  # sorted: column_i ≥ column_j
+        self.row = (np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)).astype(np.int32)
+        # The pattern (with the whole diagonal) in CSC order, lower triangle; each product's place
+        # in it by a binary search of its (column, row) key.
+        pattern = sp.tril(abs(csr.T) @ abs(csr) + sp.identity(n, format="csc"), format="csc")
+        pattern.sort_indices()
+        keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
+        self.position = np.searchsorted(keys, column_j.astype(np.int64) * n + column_i).astype(np.int64)
+        self.diagonal_position = np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
+        self.size = keys.size
+        self.shape = (n, n)
+        self._first, self._second = first, second
+        self.product = csr.data[first] * csr.data[second]
+        self._indptr, self._indices = csr.indptr.copy(), csr.indices.copy()
+        self._rows = pattern.indices.tolist()
+        self._cols = (keys // n).tolist()
+        self._permutation = _nested_dissection(pattern)
+        self._matrix: Any = None
+        self._symbolic: Any = None
+
+    def refresh(self, matrix: sp.spmatrix) -> bool:
+        """Take the values of ``matrix`` if it has the pattern this was built for (then the
+        ordering and the symbolic factorization are reused). Returns whether it did."""
+        csr = sp.csr_matrix(matrix)
+        if csr.shape[1] != self.shape[0] or not (np.array_equal(csr.indptr, self._indptr)
+                                                 and np.array_equal(csr.indices, self._indices)):
+            return False
+        self.product = csr.data[self._first] * csr.data[self._second]
+        return True
+
+    def values(self, w: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """The stored (lower-triangle, CSC-ordered) values for these weights."""
+        data = np.bincount(self.position, weights=self.product * w[self.row], minlength=self.size)
+        data[self.diagonal_position] += d
+        return data
+
+    def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize for these weights; returns a function ``v ↦ (diag(d) + Aᵀ diag(w) A)⁻¹ v``.
+
+        Raises:
+            ArithmeticError: the matrix is not numerically positive definite (CHOLMOD's error).
+        """
+        data = cvxopt.matrix(self.values(w, d))
+        if self._matrix is None:
+            self._matrix = cvxopt.spmatrix(data, self._rows, self._cols, self.shape)
+            saved = dict(cholmod.options)
+            cholmod.options["supernodal"] = 2  # supernodal: dense BLAS kernels
+            try:
+                if self._permutation is None:
+                    self._symbolic = cholmod.symbolic(self._matrix, uplo="L")
+                else:
+                    self._symbolic = cholmod.symbolic(self._matrix, uplo="L",
+                                                      p=cvxopt.matrix(self._permutation.tolist(), tc="i"))
+            finally:
+                cholmod.options.clear()
+                cholmod.options.update(saved)
+        else:
+            self._matrix.V = data
+        cholmod.numeric(self._matrix, self._symbolic)
+        factor = self._symbolic
+
+        def solve(v: np.ndarray) -> np.ndarray:
+            x = cvxopt.matrix(np.asarray(v, dtype=float))
+            cholmod.solve(factor, x)
+            return np.asarray(x).ravel()
+
+        return solve

@@ -1,0 +1,49 @@
+"""The fixed-pattern Gram matrix and its factorization (qpcontact/solvers/cholesky.py)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from qpcontact.solvers import cholesky
+from qpcontact.solvers.cholesky import GramMatrix
+
+
+def random_rows(seed: int, k: int = 400, n: int = 300) -> sp.csr_matrix:
+    """Rows with two blocks of three entries each, like contact rows between two cells."""
+    rng = np.random.default_rng(seed)
+    cells = rng.integers(0, n // 3, size=(k, 2))
+    cells[:, 1] = np.where(cells[:, 1] == cells[:, 0], (cells[:, 0] + 1) % (n // 3), cells[:, 1])
+    columns = (3 * cells[:, :, None] + np.arange(3)).reshape(k, 6)
+    return sp.csr_matrix((rng.standard_normal(6 * k), (np.repeat(np.arange(k), 6), columns.ravel())), shape=(k, n))
+
+
+@pytest.mark.parametrize("metis_size", [10**9, 0], ids=["amd", "nested-dissection"])
+def test_refill_and_solve_equal_the_sparse_product(monkeypatch, metis_size):
+    """The fixed-pattern refill of diag(d) + Aᵀ diag(w) A against scipy's product, for two
+    weightings (the second reuses the ordering and the symbolic factorization), with either
+    ordering."""
+    monkeypatch.setattr(cholesky, "METIS_SIZE", metis_size)
+    A = random_rows(1)
+    rng = np.random.default_rng(2)
+    gram = GramMatrix(A)
+    for _ in range(2):
+        w, d = rng.uniform(0.1, 2.0, A.shape[0]), rng.uniform(0.1, 2.0, A.shape[1])
+        solve = gram.factor(w, d)
+        dense = (A.T @ sp.diags(w) @ A).toarray() + np.diag(d)
+        stored = sp.csc_matrix((gram.values(w, d), (gram._rows, gram._cols)), shape=gram.shape).toarray()
+        assert np.allclose(stored, np.tril(dense))
+        v = rng.standard_normal(A.shape[1])
+        assert np.allclose(dense @ solve(v), v)
+
+
+def test_refresh_takes_new_values_of_the_same_pattern_only():
+    A = random_rows(3)
+    gram = GramMatrix(A)
+    B = A.copy()
+    B.data = B.data * 2.0
+    assert gram.refresh(B)
+    w, d = np.ones(A.shape[0]), np.ones(A.shape[1])
+    dense = (B.T @ B).toarray() + np.eye(A.shape[1])
+    v = np.arange(A.shape[1], dtype=float)
+    assert np.allclose(dense @ gram.factor(w, d)(v), v)
+    assert not gram.refresh(random_rows(4))
