@@ -1,7 +1,8 @@
 """A colony growing between two walls (a microfluidic channel), in your own loop.
 
-One cell grows and divides in a channel 4 µm wide along x: ``qpcontact.grow`` (growth drive,
-contact solve with the cells and the two walls, move) and ``qpcontact.divide`` each step, with
+One cell grows and divides in a channel 4 µm wide along x: ``qpcontact.divide`` then
+``qpcontact.grow`` (growth drive, contact solve with the cells and the two walls, move) each
+step (dividing first, so that the step's contact solve sees the daughters), with
 the options ``qpcontact simulate`` uses (``Settings().step_options()``) plus the walls
 (``qpcontact.channel``). The colony fills the channel and spreads along it. Writes a picture
 with the walls drawn.
@@ -34,10 +35,10 @@ def main(argv: list[str] | None = None) -> int:
     colony = simulate.founder(settings)  # one cell at the origin, along x
     rng = np.random.default_rng(settings.run.seed)
     while colony.cells.n < args.cells:
-        dt = qc.expansion_time_step(colony, max_dt=settings.run.max_dt, cfl=settings.run.cfl)
-        colony, out = qc.grow(colony, dt, **options)
         colony = qc.divide(colony, settings.model.division_length, rng, axis_noise=settings.model.axis_noise,
                            rate_noise=settings.model.rate_noise, base_rate=settings.model.rate, planar=True)
+        dt = qc.expansion_time_step(colony, max_dt=settings.run.max_dt, cfl=settings.run.cfl)
+        colony, out = qc.grow(colony, dt, **options)
     cells = colony.cells
     half = 0.5 * cells.lengths[:, None] * cells.axes
     reach = np.abs(np.concatenate([cells.centers - half, cells.centers + half])[:, 1]) + np.tile(cells.radii, 2)

@@ -89,3 +89,27 @@ def real_array(name: str, value: Any, error: type[QPContactError]) -> np.ndarray
     if raw.dtype.kind not in "iuf":
         raise error(f"{name}: expected numbers, got an array of {raw.dtype} values")
     return raw.astype(float)
+
+
+def integer(name: str, value: Any, *, minimum: int | None = None,
+            error: type[QPContactError] = InvalidArgumentError) -> int:
+    """``value`` as an int: a Python or NumPy integer (not a bool, not a float such as NaN or
+    2.0: a count or an id is not a measurement)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise error(f"{name}: expected an integer, got {value!r} ({type(value).__name__})")
+    out = int(value)
+    if minimum is not None and out < minimum:
+        raise error(f"{name}: expected an integer >= {minimum}, got {out}")
+    return out
+
+
+def integer_array(name: str, value: Any, error: type[QPContactError] = InvalidArgumentError) -> np.ndarray:
+    """``value`` as an int64 array: an array (or list) of integers. Floats are refused, whole or
+    not (an id of 0.5 or NaN would be cast to some other id without a word)."""
+    try:
+        raw = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # ragged nesting
+        raise error(f"{name}: cannot be read as an array of integers ({exc})") from None
+    if raw.dtype.kind not in "iu" or (raw.dtype.kind == "u" and raw.size and int(raw.max()) >= 2**63):
+        raise error(f"{name}: expected integers, got an array of {raw.dtype} values")
+    return raw.astype(np.int64)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -122,3 +124,61 @@ def interrupt_on_call(monkeypatch: pytest.MonkeyPatch, module: object, name: str
         return real(*args, **kwargs)
 
     monkeypatch.setattr(module, name, interrupted)
+
+
+def gate_model(folder: Path, step: int, *, stop_flag: Path | None = None, skip_first: bool = False) -> Path:
+    """A model hook file (``--hook``) whose hook holds a run at a known step, so that a test can
+    signal or kill it there instead of racing a signal against the machine's speed.
+
+    At step ``step`` the hook writes ``folder/"held"`` (with the process id) and waits: until
+    ``stop_flag`` exists (a sweep's stop flag; then it returns and the run goes on), or for ever
+    (the test signals or kills the process). It holds one run once: later runs, and the run
+    resumed, pass (``held`` exists). ``skip_first``: the first run to reach the step passes
+    (``folder/"passed"``), the next one is held."""
+    path = folder / "gate.py"
+    path.write_text(f'''"""A test's gate (tests/helpers.py::gate_model)."""
+import os
+import pathlib
+import time
+
+FOLDER = pathlib.Path({str(folder)!r})
+STOP = {None if stop_flag is None else str(stop_flag)!r}
+
+
+def hook(colony, step):
+    if step != {step} or (FOLDER / "held").exists():
+        return None
+    if {skip_first!r} and not (FOLDER / "passed").exists():
+        (FOLDER / "passed").write_text(str(os.getpid()))
+        return None
+    (FOLDER / "held").write_text(str(os.getpid()))
+    while STOP is None or not pathlib.Path(STOP).exists():
+        time.sleep(0.05)
+    return None
+''')
+    return path
+
+
+def wait_for(condition, what: str, timeout: float):
+    """The first true value of ``condition()``, polled every 0.05 s (a wait for an event, not a
+    guess of how long something takes); ``TimeoutError`` naming ``what`` after ``timeout`` s."""
+    import time
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        time.sleep(0.05)
+    raise TimeoutError(f"timed out waiting for {what}")
+
+
+def default_signals() -> None:
+    """``preexec_fn`` of a child that a test signals: SIGINT and SIGTERM at their defaults, as in a
+    terminal. A child inherits an *ignored* SIGINT (something earlier in the test process, such as
+    a multiprocessing or Dask helper, may have ignored it) and Python then installs no
+    KeyboardInterrupt handler: the child would not hear Ctrl-C at all."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)

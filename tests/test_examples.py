@@ -1,4 +1,5 @@
-"""Every script in examples/ runs (at a small size) and does what it says."""
+"""Every script in examples/ runs at its defaults (the size a user would try; each under ~20 s
+here) and does what it says. Only the output folder is given (a temporary one)."""
 
 from __future__ import annotations
 
@@ -29,13 +30,13 @@ def test_every_example_is_tested():
 
 
 def test_own_loop_clears_the_overlap(capsys):
-    assert run_example("own_loop", "--steps", "30") == 0
+    assert run_example("own_loop") == 0
     final = [line for line in capsys.readouterr().out.splitlines() if line.startswith("final largest overlap")]
     assert len(final) == 1 and float(final[0].split()[3]) < 1e-6
 
 
 def test_a_foreign_state_with_overlaps_of_0_15_is_cleared_without_spinning(capsys):
-    assert run_example("foreign_state", "--rows", "8", "--steps", "6") == 0
+    assert run_example("foreign_state") == 0
     lines = capsys.readouterr().out.splitlines()
     start = float(lines[0].split("largest overlap ")[1].split()[0])
     rows = [line.split("|") for line in lines if "|" in line and line.split("|")[0].strip().isdigit()]
@@ -46,16 +47,20 @@ def test_a_foreign_state_with_overlaps_of_0_15_is_cleared_without_spinning(capsy
 
 
 def test_a_colony_between_walls_stays_between_them(tmp_path, capsys):
-    assert run_example("channel", "--cells", "12", "--out", str(tmp_path)) == 0
+    """At its default 60 cells: until issue 19 a step's Clarabel answer ended "AlmostSolved" with
+    residuals inside what the tolerance promises, was refused for its status word, and the
+    example stopped with a traceback (the test ran 12 cells)."""
+    assert run_example("channel", "--out", str(tmp_path)) == 0
     assert (tmp_path / "channel.png").stat().st_size > 1000
-    assert "walls at 2 µm" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "walls at 2 µm" in out and int(out.split()[0]) >= 60
 
 
 def test_a_3d_biofilm_is_exported_to_paraview(tmp_path, capsys):
     pytest.importorskip("meshio", reason="the example needs qpcontact[vtk]")
     from qpcontact.colony.paraview import read_series
 
-    assert run_example("biofilm_paraview", "--cells", "12", "--every", "10", "--out", str(tmp_path)) == 0
+    assert run_example("biofilm_paraview", "--out", str(tmp_path)) == 0
     series = read_series(tmp_path / "colony.pvd")
     assert len(series) >= 3 and all(f.exists() for _, f in series)
     assert "open" in capsys.readouterr().out
@@ -64,13 +69,13 @@ def test_a_3d_biofilm_is_exported_to_paraview(tmp_path, capsys):
 def test_a_solver_comparison_on_your_own_scene(capsys):
     import qpcontact as qc
 
-    assert run_example("compare_solvers", "--cells", "20") == 0
+    assert run_example("compare_solvers") == 0
     out = capsys.readouterr().out
     assert all(f"\n{solver} " in out for solver in qc.available_solvers())
 
 
 def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
-    assert run_example("model_hook", "--cells", "6", "--out", str(tmp_path / "script")) == 0
+    assert run_example("model_hook", "--out", str(tmp_path / "script")) == 0
     from qpcontact.cli import main
 
     assert main(["simulate", "--hook", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),

@@ -103,3 +103,58 @@ def test_division_and_growth_settings_that_would_do_nothing_silently_are_refused
         Colony.founder(sphere, rates=np.log(2))
     Colony.founder(sphere, rates=0.0)  # a sphere that does not grow is fine
     Colony.founder(sphere.replace(masses=np.inf), rates=np.log(2))  # so is a fixed one
+
+
+# ------------------------------------------------------------------------------------------
+# Issue 19, item 5: inputs that still escaped (one case each)
+# ------------------------------------------------------------------------------------------
+def one_cell():
+    return qc.Cells([[0.0, 0.0, 0.0]], [1, 0, 0], 2.0, 0.5)
+
+
+def empty_cells():
+    return qc.Cells(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0))
+
+
+@pytest.mark.parametrize("build, match", [
+    (lambda: Colony(one_cell(), np.array([0.5]), [-1], [0.7]), "Colony.ids: expected integers"),
+    (lambda: Colony(one_cell(), np.array([1.0]), [-1], [0.7]), "Colony.ids: expected integers"),
+    (lambda: Colony(one_cell(), np.array([np.nan]), [-1], [0.7]), "Colony.ids: expected integers"),
+    (lambda: Colony(one_cell(), [0], np.array([np.nan]), [0.7]), "Colony.parent_ids: expected integers"),
+    (lambda: Colony(one_cell(), [0], [-1], [0.7], time=float("nan")), "Colony.time: expected a finite real number"),
+    (lambda: Colony(one_cell(), [0], [-1], [0.7], time="0"), "Colony.time"),
+    (lambda: Colony(one_cell(), [0], [-1], [0.7], next_id=float("nan")), "Colony.next_id: expected an integer"),
+    (lambda: Colony(one_cell(), [0], [-1], [0.7], next_id=3.0), "Colony.next_id: expected an integer"),
+    (lambda: Colony(one_cell(), [0], [-1], [[0.7, 0.2]]), "Colony.rates: expected shape \\(1,\\)"),
+    (lambda: Colony(one_cell(), [0], [-1], ["fast"]), "Colony.rates: expected numbers"),
+    (lambda: Colony.founder(one_cell(), [0.7, 0.2]), "rates: expected one rate or 1"),
+    (lambda: Colony("cells", [0], [-1], [0.7]), "Colony.cells: expected qpcontact.Cells"),
+    (lambda: qc.Plane("a", (0, 0, 1)), "Plane.point: expected numbers"),
+    (lambda: qc.Plane((0, 0, 0), "up"), "Plane.normal: expected numbers"),
+    (lambda: qc.channel("4"), "channel width: expected a finite real number"),
+    (lambda: qc.channel(4.0, center_y="0"), "center_y: expected a finite real number"),
+    (lambda: qc.substrate("0"), "height: expected a finite real number"),
+    (lambda: qc.expansion_time_step(Colony.founder(one_cell(), 0.7), max_dt="0.02"), "max_dt"),
+])
+def test_bad_colony_and_plane_arguments_are_named(build, match):
+    with pytest.raises(InvalidArgumentError, match=match):
+        build()
+
+
+def test_a_colony_of_integer_ids_still_builds():
+    colony = Colony(one_cell(), np.array([7], dtype=np.int32), [-1], [0.7], time=1, next_id=np.int64(8))
+    assert colony.ids.dtype == np.int64 and colony.time == 1.0 and colony.next_id == 8
+
+
+def test_the_time_step_of_an_empty_colony_is_the_largest_one():
+    empty = Colony(empty_cells(), np.zeros(0, dtype=int), np.zeros(0, dtype=int), np.zeros(0))
+    assert qc.expansion_time_step(empty, max_dt=0.02) == 0.02
+    from qpcontact.colony import growth_time_step
+
+    assert growth_time_step(empty, still=0.03) == 0.03
+
+
+@pytest.mark.parametrize("planar", [True, False, None])
+def test_a_step_of_no_cells_is_no_step(planar):
+    out = qc.step(empty_cells(), 0.1, planar=planar)
+    assert out.cells.n == 0 and len(out.contacts) == 0 and out.max_overlap == 0.0

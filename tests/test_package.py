@@ -126,6 +126,81 @@ def test_documents_name_files_and_tests_that_exist(document):
     assert not missing, f"{document.name} names what does not exist: {sorted(set(missing))}"
 
 
+#: Paths the documents name that are not files of the repository, each on purpose: what commands
+#: write (into a folder given with --out, or the --out prefix itself), and names that only look
+#: like paths. Everything else a document names must exist.
+NOT_IN_THE_REPOSITORY = {
+    "./<command>-out/": "README: the default output folder of every command",
+    "OLD/config.toml": "colony.md: the settings file of an earlier run, in a folder of the user's",
+    "runs/NAME/": "colony.md: a sweep's run folders, written by qpcontact sweep",
+    "snapshots/step_NNNNNN.npz": "colony.md: snapshots, written by qpcontact simulate",
+    "vtk/step_NNNNNN.vtu": "colony.md: ParaView files, written by qpcontact simulate --vtk",
+    "docs/data/stability": "stability.md: --out prefix of qpcontact stability (it writes .csv and .md beside it)",
+    "docs/data/stability_piqp_rerun": "stability.md: --out prefix of qpcontact stability",
+    "overlap_1e-14/1e-08/0.001": "stability.md: three case names, not a path",
+}
+#: A path: segments of word characters, dots, dashes (and <placeholders>, * globs), joined by /.
+_PATH = re.compile(r"(?<![\w/.~-])((?:\.\./|\./)?[\w.<>*-]+(?:/[\w.*<>-]+)+/?)")
+_REPOSITORY_PATH = re.compile(r"(?<![\w/.-])((?:\.\./)?(?:qpcontact|tests|examples|docs|benchmarks|\.ci|shared)/[\w./*-]*\w)")
+
+
+def _named_paths(text: str) -> set[str]:
+    """Every repository path in the text (``qpcontact/``, ``tests/``, ``docs/``, ...; anywhere),
+    and every path with a file suffix or a trailing ``/`` in a code span; ``{a,b}`` expanded."""
+    found = {p.split("::")[0] for p in _REPOSITORY_PATH.findall(text)}
+    for code in re.findall(r"`([^`\n]+)`", text):
+        braces = re.search(r"\{([^}]*)\}", code)
+        spans = [code.replace(braces.group(0), part) for part in braces.group(1).split(",")] if braces else [code]
+        for span in spans:
+            for path in _PATH.findall(span):
+                last = path.rstrip("/").rsplit("/", 1)[-1]
+                if "." in last.strip(".") or path.endswith("/"):
+                    found.add(path.split("::")[0])
+    return found
+
+
+def _exists(path: str) -> bool:
+    # shared/ (the design card, the peer's tools) lies beside the repository, as in CI
+    where = ROOT.parent if path.startswith("shared/") else ROOT
+    return (where / path).exists() or ("*" in path and any(where.glob(path)))
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to hyphens."""
+    text = re.sub(r"[`*_]", "", heading.strip().lower())
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+@pytest.mark.parametrize("document", DOCUMENTS, ids=lambda p: p.name)
+def test_every_path_and_relative_link_a_document_names_exists(document):
+    """Issue 19: only ``.py`` paths were checked (25 of 76 named paths and every link were not).
+    Every path (data, pictures, scripts, documents) and every relative link with its ``#anchor``
+    must exist, except the outputs listed in NOT_IN_THE_REPOSITORY."""
+    text = document.read_text()
+    missing = sorted(p for p in _named_paths(text) if p not in NOT_IN_THE_REPOSITORY and not _exists(p))
+    for target in re.findall(r"\]\(([^)\s]+)\)", text):
+        if re.match(r"[a-z]+:", target):  # http:, https:, mailto:
+            continue
+        file, _, anchor = target.partition("#")
+        linked = (document.parent / file) if file else document
+        if not linked.exists():
+            missing.append(target)
+        elif anchor and linked.suffix == ".md":
+            headings = re.findall(r"^#+ (.*)$", linked.read_text(), re.M)
+            if anchor not in {_slug(h) for h in headings}:
+                missing.append(target)
+    assert not missing, f"{document.name} names what does not exist: {missing}"
+
+
+def test_the_path_check_finds_what_is_missing(tmp_path):
+    """(Guards the test above: it would catch a stale path, a stale link and a stale anchor.)"""
+    text = ("see `docs/img/gone.png`, qpcontact/gone.py, `out/x.csv` and [a](docs/model-notes.md#nowhere), "
+            "[b](docs/nothing.md)")
+    assert {"docs/img/gone.png", "qpcontact/gone.py", "out/x.csv"} <= _named_paths(text)
+    assert not _exists("docs/img/gone.png") and _exists("docs/img/colony_2d.png") and _exists("shared/design/model.md")
+    assert _slug("The position-level step (issue 12)") == "the-position-level-step-issue-12"
+
+
 def architecture_tree() -> set[str]:
     """The package's modules that docs/architecture.md's tree lists: each line is an entry (a
     name, or names separated by commas, indented two spaces a level) and its description after

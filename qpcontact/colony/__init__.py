@@ -33,6 +33,7 @@ Imports the geometry, assembly, solvers and resolve wings only.
 from ..geometry.motion import rotate
 from .growth import (
     Colony,
+    daughters_share,
     divide,
     expansion_time_step,
     grow,
@@ -64,7 +65,8 @@ __all__ = [
     "CellMechanics", "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
     "PositionStepResult", "PressureGrowth", "Run", "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
     "cell_forces", "cell_pressure", "cell_stress", "fit_parabola", "pressure_growth_rate", "radial_profile",
-    "StepControl", "StepOutcome", "StepResult", "advance", "divide", "expansion_time_step", "grow", "grow_position",
+    "StepControl", "StepOutcome", "StepResult", "advance", "daughters_share", "divide", "expansion_time_step", "grow",
+    "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",
     "overlap_fractions", "position_step", "push", "rotate", "run_colony", "save_colony", "step", "volumes",
 ]

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..checks import flag, number, real_array
+from ..checks import flag, instance, integer, integer_array, number, real_array
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Plane, capsule_volume
 from ..geometry.motion import rotate
@@ -64,14 +64,19 @@ class Colony:
     next_id: int = -1
 
     def __post_init__(self) -> None:
+        instance("Colony.cells", self.cells, Cells, "qpcontact.Cells")
         n = self.cells.n
-        for name, dtype in (("ids", np.int64), ("parent_ids", np.int64), ("rates", float), ("owed", float)):
-            arr = np.asarray(getattr(self, name), dtype=dtype)
+        for name in ("ids", "parent_ids", "rates", "owed"):
+            value = getattr(self, name)
+            arr = (integer_array(f"Colony.{name}", value) if name.endswith("ids")
+                   else real_array(f"Colony.{name}", value, InvalidArgumentError))
             if name == "owed" and arr.ndim == 0:
                 arr = np.full(n, float(arr))
             if arr.shape != (n,):
-                raise InvalidArgumentError(f"Colony.{name}: expected shape ({n},), got {arr.shape}")
+                raise InvalidArgumentError(f"Colony.{name}: expected shape ({n},) (one per cell), got {arr.shape}")
             object.__setattr__(self, name, arr)
+        object.__setattr__(self, "time", number("Colony.time", self.time))
+        object.__setattr__(self, "next_id", integer("Colony.next_id", self.next_id))
         for name in ("rates", "owed"):
             arr = getattr(self, name)
             if not np.all(np.isfinite(arr)) or np.any(arr < 0):
@@ -92,9 +97,13 @@ class Colony:
 
     @classmethod
     def founder(cls, cells: Cells, rates: Any) -> Colony:
-        """A colony of founder cells (ids 0..N-1, no parents) growing at ``rates`` [1/time]."""
-        rates = np.broadcast_to(np.asarray(rates, dtype=float), (cells.n,))
-        return cls(cells, np.arange(cells.n), np.full(cells.n, -1), rates)
+        """A colony of founder cells (ids 0..N-1, no parents) growing at ``rates`` [1/time]: one
+        rate for all, or one per cell."""
+        instance("cells", cells, Cells, "qpcontact.Cells")
+        rates = real_array("rates", rates, InvalidArgumentError)
+        if rates.shape not in ((), (cells.n,)):
+            raise InvalidArgumentError(f"rates: expected one rate or {cells.n} (one per cell), got shape {rates.shape}")
+        return cls(cells, np.arange(cells.n), np.full(cells.n, -1), np.broadcast_to(rates, (cells.n,)))
 
     def replace(self, **changes: Any) -> Colony:
         """A new, validated Colony with some fields replaced."""
@@ -206,6 +215,32 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
     )
 
 
+def daughters_share(values: np.ndarray, before: Colony, after: Colony) -> np.ndarray:
+    """Per-cell rows of ``before`` (e.g. a model hook's drive, (N, ...)) for the cells of
+    ``after = divide(before, ...)``: a mother's row is halved between her two daughters (as
+    :func:`divide` halves her momenta: a drive ``m·v`` then still moves each daughter at ``v``);
+    other cells keep theirs.
+
+    Raises:
+        InvalidArgumentError: ``values`` has no row per cell of ``before``, or ``after`` is not a
+            division of ``before``.
+    """
+    values = np.asarray(values, dtype=float)
+    n = before.cells.n
+    if values.shape[:1] != (n,):
+        raise InvalidArgumentError(f"values: expected one row per cell ({n}), got shape {values.shape}")
+    if after is before:
+        return values
+    # divide puts daughter 1 in her mother's place under a new id and appends daughter 2, in order
+    dividing = np.flatnonzero(after.ids[:n] != before.ids) if after.cells.n >= n else np.zeros(0, dtype=np.intp)
+    if after.cells.n != n + dividing.size:
+        raise InvalidArgumentError(f"after: {after.cells.n} cells are not a division of {n} ({dividing.size} mothers)")
+    half = values[dividing] / 2
+    out = values.copy()
+    out[dividing] = half
+    return np.concatenate([out, half])
+
+
 def _grown(colony: Colony, before: Cells, after: Cells, paid: np.ndarray, dt: float) -> Colony:
     """The colony after a growth step that took ``before`` to ``after``: masses and growth
     inertias grown with the volume including what is owed (constant density), the owed length
@@ -219,8 +254,8 @@ def _grown(colony: Colony, before: Cells, after: Cells, paid: np.ndarray, dt: fl
 
 def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.ndarray | None = None,
          **step_options: Any) -> tuple[Colony, StepResult]:
-    """One growth step with the velocity-level :func:`qpcontact.colony.step` (no division; call
-    :func:`divide` after it).
+    """One growth step with the velocity-level :func:`qpcontact.colony.step` (no division: call
+    :func:`divide` before it, so that the step's contact solve sees the daughters).
 
     The growth drive (:func:`growth_drive` of :func:`growth_step`) enters as the growth momentum
     — overdamped, as the growth column of ``drive``; inertial, by setting ``g`` (growth is a
@@ -259,7 +294,8 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
                   warm: ContactImpulses | None = None, motion: CellMotion | None = None,
                   on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
     """One growth step with the position-level :func:`qpcontact.colony.position_step`
-    (overdamped; no division: call :func:`divide` after it).
+    (overdamped; no division: call :func:`divide` before it, so that the step clears the
+    overlap the daughters' axis noise makes and the state it returns keeps its tolerance).
 
     The growth drive of :func:`growth_step` is the growth column of ``drive`` (user-given
     momenta in the other columns); after the step, masses and growth inertias grow with the
@@ -313,7 +349,14 @@ def expansion_time_step(colony: Colony, *, max_dt: float, cfl: float = 0.2, dime
     the speed is estimated from the geometry, not from the last step's velocities (those include
     the position-correction speeds ``β·overlap/dt``, which would feed back into ``dt``).
     """
+    instance("colony", colony, Colony, "qpcontact.Colony")
+    max_dt = number("max_dt", max_dt, minimum=0.0, open_minimum=True)
+    cfl = number("cfl", cfl, minimum=0.0, open_minimum=True)
+    if dimensions not in (2, 3):
+        raise InvalidArgumentError(f"dimensions: expected 2 or 3, got {dimensions!r}")
     cells = colony.cells
+    if cells.n == 0:  # nothing grows or moves
+        return max_dt
     reach = np.linalg.norm(cells.centers - cells.centers.mean(axis=0), axis=1) + cells.lengths / 2 + cells.radii
     speed = float(colony.rates.max(initial=0.0)) * float(reach.max()) / dimensions
     diameter = 2.0 * float(np.median(cells.radii))

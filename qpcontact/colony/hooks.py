@@ -17,13 +17,17 @@ On the command line: ``qpcontact simulate --hook my_model.py``, where ``my_model
 A hook with a parameter named ``mechanics``, ``hook(colony, step, mechanics)``, is also given
 the cells' mechanics over the step that led to the colony (a
 :class:`~qpcontact.colony.CellMechanics`: ``pressure`` (N,), ``stress`` (N, 3, 3), one per cell
-of ``colony``, a newborn with its mother's; zero before the first step): growth that slows
-under pressure is ``colony.replace(rates=pressure_growth_rate(base, mechanics.pressure, ...))``
+of ``colony``: cells divide at the start of a step, so each has its own; zero before the first
+step): growth that slows under pressure is
+``colony.replace(rates=pressure_growth_rate(base, mechanics.pressure, ...))``
 (:func:`qpcontact.colony.pressure_growth_rate`; ``examples/pressure_growth.py``). The colony's
 ``rates`` are what the next step grows with and what it keeps: compute them from a base rate
-each step, not from the rates the hook set the step before, or the slowing compounds. (The same
-laws without a hook: the model settings ``pressure_growth`` and ``stall_pressure``,
-``qpcontact simulate --pressure-growth linear``.)
+each step, not from the rates the hook set the step before, or the slowing compounds. A cell that
+divides at the start of the step does not pass the rate the hook gave it on: its daughters grow
+that step at the rate division draws for newborns (the run's ``rate``, with ``rate_noise``), and
+the hook sets theirs from the next step on. (The same laws without a hook: the model settings
+``pressure_growth`` and ``stall_pressure``, ``qpcontact simulate --pressure-growth linear``,
+under which a newborn's first step is slowed by her mother's pressure.)
 
 A hook that depends only on what it is given (the colony, its ids and time, the step, the
 mechanics, which the snapshots keep) continues exactly when a run is resumed from a snapshot. A
@@ -58,10 +62,13 @@ class StepControl:
             (the sink towards the substrate in 3D), in momentum units [mass·µm/doubling time].
             In the overdamped dynamics of ``qpcontact simulate`` a cell without contacts then
             moves at ``p/m``: to push cell i at velocity v, ``drive[i, :3] = masses[i] * v``
-            (:func:`push`). The growth column is ignored (growth is set by ``rates``).
-        division_length: the length [µm] at which each cell divides after this step: a number
-            or an (N,) array (None: the run's ``division_length``). Daughters need
-            ``l/2 > radius``.
+            (:func:`push`). The growth column is ignored (growth is set by ``rates``). A cell
+            that divides at the start of this step gives each daughter half of its row (as its
+            momenta and mass: a pushed mother's daughters move at her velocity).
+        division_length: the length [µm] at which each cell of the colony given divides, at the
+            start of this step (before it moves: the step's contact solve then clears the
+            daughters' overlap): a number or an (N,) array (None: the run's
+            ``division_length``). Daughters need ``l/2 > radius``.
     """
 
     colony: Colony | None = None

@@ -12,8 +12,10 @@ step is exit status 2 and one line saying why.
 Units: lengths in µm, time in doubling times (the time a cell's cylinder length takes to double at
 the default rate ln 2; a free cell divides every 1.27 of them: :mod:`qpcontact.colony.settings`),
 masses in units of volume. Every step: the model hook, if any (:mod:`qpcontact.colony.hooks`), then
-the run's step function (:func:`step_function`), then :func:`qpcontact.colony.divide`. Two steps
-(``--step``):
+:func:`qpcontact.colony.divide` (every cell that reached its division length), then the run's step
+function (:func:`step_function`), whose contact solve clears the overlap the daughters' axis noise
+made: every state a run saves or returns is the end of a step, within its overlap tolerance. Two
+steps (``--step``):
 
 - ``position`` (default): :func:`qpcontact.colony.grow_position`, non-penetration at the end of
   the step (:mod:`qpcontact.colony.position`; settings ``--position-*``), with a time step set by
@@ -63,7 +65,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from datetime import UTC, datetime
 from functools import partial
 from pathlib import Path
@@ -75,7 +77,7 @@ from ..arguments import output_folder, run_standalone
 from ..described import Layer, settings_of, show
 from ..errors import InvalidArgumentError, ModelHookError, SolverFailedError, StepFailedError
 from ..geometry import Cells, capsule_volume
-from .growth import Colony, divide, grow, grow_position
+from .growth import Colony, daughters_share, divide, grow, grow_position
 from .hooks import Hook, apply_hook, load_hook, push
 from .mechanics import CellMechanics, PressureGrowth
 from .position import CellMotion, ContactImpulses, PositionStepResult
@@ -104,7 +106,7 @@ StepOutcome = NamedTuple("StepOutcome", [("colony", Colony), ("result", StepResu
 StepOutcome.__doc__ = """What a run's step function returns (:func:`step_function`).
 
 Attributes:
-    colony: the colony after the step, before division.
+    colony: the colony after the step (:func:`run_colony` divides cells before the step).
     result: the step's :class:`~qpcontact.colony.StepResult` (velocity-level: its ``result`` —
         the :class:`qpcontact.Result` of the contact solve, with ``contacts``, ``times`` and
         ``errors`` — and ``max_overlap``, ``mean_overlap`` fill the history) or
@@ -194,8 +196,8 @@ def turning_reach(cells: Cells, dt: float) -> float:
 
 def step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunction:
     """The function :func:`run_colony` advances the colony with, once per step:
-    ``take_step(colony, dt, drive=drive) -> StepOutcome`` (the colony after the step, before
-    division; the step's result; the step taken; the rejected attempts).
+    ``take_step(colony, dt, drive=drive) -> StepOutcome`` (the colony after the step, whose
+    cells divided before it; the step's result; the step taken; the rejected attempts).
 
     ``extra`` is the run's extra state: saved in every snapshot (its "extra arrays") and restored
     from the snapshot a run resumes from, so that a step function can carry data from step to
@@ -218,9 +220,16 @@ MOTION_ARRAYS = ("ids", "velocity", "turning")
 def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunction:
     """The position-level step of a run (:func:`qpcontact.colony.grow_position`): the substrate
     in 3D, the planar unknowns in 2D, the contact impulses and the cells' motion of each step kept
-    in ``extra`` as the next one's warm start and predictor (and so restored on resume). A step that does not reach the overlap
-    tolerance is retried with half the step, up to ``run.max_halvings`` times; the last failure
-    is raised (:class:`~qpcontact.errors.StepFailedError`), never applied."""
+    in ``extra`` as the next one's warm start and predictor (and so restored on resume). A step that
+    does not reach the overlap tolerance is retried with half the step, up to ``run.max_halvings``
+    times; the last failure is raised (:class:`~qpcontact.errors.StepFailedError`), never applied.
+
+    The state a step ends in keeps the overlap tolerance unless overlap present at its start
+    exceeded what ``relaxation`` clears in one step (a division's axis noise turning a daughter
+    into a neighbour by more than 0.05 of a diameter, or a state from elsewhere): such a step is
+    taken once more with the relaxation raised to that start overlap, so that it clears it
+    (turning still bounded by ``turn_limit``); if that fails, the first step stands and the
+    history shows its overlap."""
     position, halvings = settings.position, settings.run.max_halvings
     planar = settings.run.dimensions == 2
     planes = settings.planes()
@@ -237,6 +246,14 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> 
                     raise
                 dt /= 2.0
                 continue
+            if out.max_overlap > position.overlap_tolerance and out.start_overlap > position.relaxation:
+                clearing = replace(position, relaxation=out.start_overlap)
+                try:
+                    grown, out = grow_position(colony, dt, drive=drive, planes=planes,
+                                               planar=True if planar else None, settings=clearing, warm=warm,
+                                               motion=motion)
+                except StepFailedError:
+                    pass  # the first answer stands: converged, only above the bound
             extra.update({f"warm.{name}": getattr(out.warm, name) for name in WARM_ARRAYS})
             extra.update({f"motion.{name}": getattr(out.motion, name) for name in MOTION_ARRAYS})
             return StepOutcome(grown, out, dt, attempt)
@@ -265,7 +282,8 @@ def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float,
     dimensionless); the position step checks the true distances at the end of the step instead
     (``max_overlap``), so they are not measured there (NaN), and ``linearizations`` says how many
     solves it took. ``mean_pressure``/``max_pressure``: over the cells of the end of the step
-    (before division), from ``mechanics`` (:func:`step_mechanics`; NaN without)."""
+    (the state after it: cells divide at the start of a step), from ``mechanics``
+    (:func:`step_mechanics`; NaN without)."""
     out = outcome.result
     pressure = np.array([np.nan]) if mechanics is None else mechanics.pressure
     if pressure.size == 0:  # no cells
@@ -287,8 +305,8 @@ def history_row(step: int, colony: Colony, outcome: StepOutcome, seconds: float,
 
 
 def step_mechanics(outcome: StepOutcome, settings: Settings) -> CellMechanics:
-    """The pressure and stress of the cells at the end of a step (``outcome.colony``, before
-    division) from the step's contact forces (:mod:`qpcontact.colony.mechanics`; 2D stress and
+    """The pressure and stress of the cells at the end of a step (``outcome.colony``, the state
+    a run saves) from the step's contact forces (:mod:`qpcontact.colony.mechanics`; 2D stress and
     pressure for ``dimensions`` 2).
 
     The position step's forces are its ``contact_forces``. The velocity step's contact impulses
@@ -333,7 +351,8 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
         hook: a model hook (:mod:`qpcontact.colony.hooks`); default: that of the file
             ``settings.model.hook``.
         pressure_growth: growth slowed by each cell's pressure of the step before
-            (:class:`~qpcontact.colony.PressureGrowth`), applied after the hook; default: that of
+            (:class:`~qpcontact.colony.PressureGrowth`; a daughter born at the start of a step
+            feels her mother's), applied after the hook and the division; default: that of
             ``settings.model.pressure_growth`` and ``settings.model.stall_pressure``
             (:func:`pressure_growth_of`), None when it is ``"off"`` (the run is then what it was
             without pressure-dependent growth, bit for bit).
@@ -381,21 +400,28 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
                 with interrupt.armed():  # a signal now abandons the step: nothing of it is applied
                     control = apply_hook(hook, colony, step, mechanics)
                     current = colony if control.colony is None else control.colony
-                    stepping = current
-                    if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
-                        felt = mechanics if current is colony else mechanics.carried_over(colony, current)
-                        stepping = current.replace(rates=pressure_growth.rates(current, felt))
-                    dt = settings.time_step_of(stepping)
-                    drive = push(current, [0.0, 0.0, -model.sink_speed]) if not planar and model.sink_speed else None
-                    if control.drive is not None:
-                        drive = control.drive if drive is None else drive + control.drive
-                    outcome = take_step(stepping, dt, drive=drive)
-                    if stepping is not current:
-                        outcome = outcome._replace(colony=outcome.colony.replace(rates=current.rates))
-                    felt_now = step_mechanics(outcome, settings)
-                    divided = divide(outcome.colony, model.division_length if control.division_length is None
+                    # Division first, so that the overlap its axis noise makes is cleared by this
+                    # step's contact solve: every state the run saves or returns is one a step
+                    # ended in (issue 19: dividing after the step left 0.047 of a diameter in the
+                    # snapshots of a run whose steps keep 0.01).
+                    divided = divide(current, model.division_length if control.division_length is None
                                      else control.division_length, rng, axis_noise=model.axis_noise,
                                      rate_noise=model.rate_noise, base_rate=model.rate, planar=planar)
+                    stepping = divided
+                    if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
+                        felt = mechanics if current is colony else mechanics.carried_over(colony, current)
+                        if divided is not current:  # a daughter feels her mother's pressure
+                            felt = felt.carried_over(current, divided)
+                        stepping = divided.replace(rates=pressure_growth.rates(divided, felt))
+                    dt = settings.time_step_of(stepping)
+                    drive = push(divided, [0.0, 0.0, -model.sink_speed]) if not planar and model.sink_speed else None
+                    if control.drive is not None:
+                        shared = daughters_share(control.drive, current, divided)
+                        drive = shared if drive is None else drive + shared
+                    outcome = take_step(stepping, dt, drive=drive)
+                    if stepping is not divided:
+                        outcome = outcome._replace(colony=outcome.colony.replace(rates=divided.rates))
+                    felt_now = step_mechanics(outcome, settings)
             except KeyboardInterrupt:
                 rng.bit_generator.state = rng_state
                 extra.clear()
@@ -411,7 +437,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
                 error, exception = f"{where}: step not applied: {exc}", exc
                 break
-            colony, mechanics = divided, felt_now.carried_over(outcome.colony, divided)
+            colony, mechanics = outcome.colony, felt_now
             row = history_row(step, colony, outcome, time.perf_counter() - t0, felt_now)
             for name in HISTORY_FIELDS:
                 history[name].append(row[name])

@@ -38,13 +38,17 @@ key                    shape        meaning
                                     numeric or boolean, no objects
 ``qpcontact_version``  ()           the qpcontact version that wrote the file (information)
 ``pressure``           (N,)         each cell's pressure over the step that led to this state,
-                                    compressive positive (:func:`qpcontact.cell_pressure`;
-                                    a newborn has its mother's), finite
+                                    compressive positive (:func:`qpcontact.cell_pressure`),
+                                    finite
 ``stress``             (N, 3, 3)    each cell's virial stress, tension positive
                                     (:func:`qpcontact.cell_stress`), finite
 ``stress_dimensions``  ()           2: stress and pressure per footprint area (a monolayer;
                                     [force/length]); 3: per volume ([force/length²]).
                                     The three come together or not at all
+``checksum``           ()           SHA-256 (hex string) of every other array: its name, dtype,
+                                    shape and bytes, in the order of the names
+                                    (:func:`array_checksum`); written since issue 19
+                                    (covers the mechanics keys too)
 =====================  ===========  =========================================================
 
 Version 1 is the same without the optional keys. Files with the mechanics keys are still
@@ -56,7 +60,10 @@ random generator starts from the run's seed. Other tools may write either versio
 Snapshots are written through a temporary file and a rename (:func:`qpcontact.outputs.atomic_write`),
 so a killed process never leaves a truncated one. :func:`load_snapshot` checks everything above
 and raises :class:`~qpcontact.errors.InvalidSnapshotError` naming the file and the problem for a
-missing, truncated, corrupted or inconsistent file.
+missing, truncated, corrupted or inconsistent file. The checksum catches what the ZIP container's
+own CRC cannot: arrays damaged and written again (a flipped byte in a value, a file rewritten by
+another tool), which would otherwise load as a valid state. A file without a checksum (written
+before it existed, or by another tool) loads as before.
 
 Read one with plain NumPy (``np.load(path)["centers"]``), with :func:`load_colony` (the colony
 and its step) or with :func:`load_snapshot` (everything).
@@ -65,6 +72,7 @@ and its step) or with :func:`load_snapshot` (everything).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import importlib.metadata
 import json
 import re
@@ -92,6 +100,8 @@ COLONY_FIELDS = ("ids", "parent_ids", "rates", "owed")
 SCALAR_FIELDS = ("time", "step", "next_id")
 #: The keys of the cells' mechanics (optional, all three or none).
 MECHANICS_FIELDS = ("pressure", "stress", "stress_dimensions")
+#: Key of the checksum of the other arrays (:func:`array_checksum`).
+CHECKSUM = "checksum"
 #: Prefix of the keys of the extra arrays.
 EXTRA_PREFIX = "extra."
 _EXTRA_NAME = re.compile(r"[A-Za-z0-9_.\-]+")
@@ -156,6 +166,9 @@ def load_cells(path: str | Path) -> Cells:
         InvalidSnapshotError: the file is missing, corrupted or misses a cell array.
     """
     data = read_npz(path)
+    if "format" in data:  # a colony snapshot: its version and checksum count here too
+        _version(path, data)
+    _verified(path, data)
     _require(path, data, CELL_FIELDS)
     return _checked(path, lambda: cells_from_arrays(data))
 
@@ -207,7 +220,31 @@ def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: M
                                        f"{np.shape(mechanics.pressure)} and {np.shape(mechanics.stress)}")
         arrays.update(pressure=np.asarray(mechanics.pressure, dtype=float), stress=np.asarray(mechanics.stress, dtype=float),
                       stress_dimensions=np.array(2 if mechanics.planar else 3, dtype=np.int64))
+    arrays[CHECKSUM] = np.array(array_checksum({name: np.asarray(value) for name, value in arrays.items()}))
     return atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays))
+
+
+def array_checksum(arrays: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 (hex) of the arrays other than ``checksum``, in the order of their names: each
+    name, dtype (``dtype.str``), shape and C-order bytes."""
+    digest = hashlib.sha256()
+    for name in sorted(arrays):
+        if name == CHECKSUM:
+            continue
+        value = np.ascontiguousarray(arrays[name])
+        digest.update(f"{name}\0{value.dtype.str}\0{value.shape}\0".encode())
+        digest.update(value.tobytes())
+    return digest.hexdigest()
+
+
+def _verified(path: str | Path, data: Mapping[str, np.ndarray]) -> None:
+    """Raise if the file has a checksum and its arrays do not match it."""
+    if CHECKSUM not in data:
+        return
+    stored = data[CHECKSUM]
+    if stored.dtype.kind != "U" or stored.shape != () or str(stored) != array_checksum(data):
+        raise InvalidSnapshotError(f"{path}: damaged: its arrays do not match the checksum stored with them "
+                                   "(a changed value or a corrupted copy); not loaded")
 
 
 def load_colony(path: str | Path) -> tuple[Colony, int]:
@@ -229,9 +266,10 @@ def read_npz(path: str | Path) -> dict[str, np.ndarray]:
             not an NPZ file.
     """
     try:
-        with np.load(Path(path), allow_pickle=False) as data:
-            if not isinstance(data, np.lib.npyio.NpzFile):
-                raise InvalidSnapshotError(f"{path}: a single .npy array, not an NPZ snapshot")
+        data = np.load(Path(path), allow_pickle=False)
+        if not isinstance(data, np.lib.npyio.NpzFile):  # a .npy file: one array, no container to close
+            raise InvalidSnapshotError(f"{path}: a single .npy array, not an NPZ snapshot (save_colony writes .npz)")
+        with data:
             return {name: data[name] for name in data.files}
     except InvalidSnapshotError:
         raise
@@ -253,13 +291,8 @@ def load_snapshot(path: str | Path) -> Snapshot:
             settings or random state that are not JSON objects, ...).
     """
     data = read_npz(path)
-    if "format" not in data or data["format"].dtype.kind != "U" or str(data["format"]) != FORMAT:
-        raise InvalidSnapshotError(f"{path}: not a {FORMAT} snapshot")
-    version = _integer(path, data, "version")
-    if version not in SUPPORTED_VERSIONS:
-        newer = " (newer than this qpcontact)" if version > VERSION else ""
-        raise InvalidSnapshotError(f"{path}: snapshot version {version}{newer}; this qpcontact reads versions "
-                                   f"{', '.join(map(str, SUPPORTED_VERSIONS))}")
+    version = _version(path, data)
+    _verified(path, data)
     _require(path, data, (*CELL_FIELDS, *COLONY_FIELDS, *SCALAR_FIELDS))
     time = data["time"]
     if time.shape != () or time.dtype.kind not in "fiu" or not np.isfinite(time):
@@ -284,6 +317,20 @@ def load_snapshot(path: str | Path) -> Snapshot:
     if snapshot.rng_state is not None:
         snapshot.generator()  # checked now, not when the run is half set up
     return snapshot
+
+
+def _version(path: str | Path, data: Mapping[str, np.ndarray]) -> int:
+    """The format version of a colony snapshot; a file that is none, has no version, or one this
+    qpcontact cannot read, raises."""
+    if "format" not in data or data["format"].dtype.kind != "U" or str(data["format"]) != FORMAT:
+        raise InvalidSnapshotError(f"{path}: not a {FORMAT} snapshot")
+    _require(path, data, ("version",))
+    version = _integer(path, data, "version")
+    if version not in SUPPORTED_VERSIONS:
+        newer = " (newer than this qpcontact: update qpcontact to read it)" if version > VERSION else ""
+        raise InvalidSnapshotError(f"{path}: snapshot version {version}{newer}; this qpcontact reads versions "
+                                   f"{', '.join(map(str, SUPPORTED_VERSIONS))}")
+    return version
 
 
 def restore_generator(state: Mapping[str, Any], path: str | Path | None = None) -> np.random.Generator:

@@ -211,7 +211,7 @@ def step(
         raise InvalidArgumentError("damping applies to dynamics='inertial' only (overdamped momenta are reset each step)")
     if "contacts" in resolve_options:
         raise InvalidArgumentError("step finds its own contacts; pass planes= for static bodies")
-    if planar:
+    if planar and cells.n:  # (no cells: nothing is out of the plane)
         out_of_plane = (np.abs(cells.centers[:, 2] - cells.centers[0, 2]) > 0) | (cells.axes[:, 2] != 0)
         if out_of_plane.any():
             raise InvalidCellsError(f"planar=True, but cell {int(np.flatnonzero(out_of_plane)[0])} is not in the plane of cell 0")

@@ -570,6 +570,14 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
         (running.add if message.get("event") == "started" else running.discard)(message.get("run", ""))
 
     client.subscribe_topic(EVENT_TOPIC, on_event)
+    # A task writes its start to its folder before its first step, where the stop can see it even
+    # when the "started" event has not reached this client yet (issue 19: a run stopped within a
+    # second of its start was taken for one not started and cancelled, which cannot stop it).
+    starts_before = {run["name"]: len(attempts_of(sweep.folder(run))) for run in runs}
+
+    def started(run: Mapping[str, Any]) -> bool:
+        return run["name"] in running or len(attempts_of(sweep.folder(run))) > starts_before[run["name"]]
+
     pending = {client.submit(run_task, run["name"], run["settings"], str(sweep.folder(run)),
                              key=f"sweep-{run['name']}-{os.urandom(4).hex()}", pure=False): run for run in runs}
     bar = tqdm(total=len(sweep.runs), initial=len(sweep.runs) - len(runs), unit="run", desc="sweep",
@@ -611,7 +619,7 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
             if not finished:
                 time.sleep(0.2)
     except KeyboardInterrupt:
-        stop(sweep, client, pending, collect, running)
+        stop(sweep, client, pending, collect, started)
         return False
     finally:
         bar.close()
@@ -620,14 +628,17 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
     return True
 
 
-def stop(sweep: Sweep, client: Any, pending: dict[Any, Any], collect: Callable[[], bool], running: set[str]) -> None:
+def stop(sweep: Sweep, client: Any, pending: dict[Any, Any], collect: Callable[[], bool],
+         started: Callable[[Mapping[str, Any]], bool]) -> None:
     """Stop a sweep: the runs not started are cancelled; the running ones see the stop flag and
     save their state at their next step (waited for up to :data:`STOP_WAIT` seconds; a second
-    Ctrl-C does not wait)."""
+    Ctrl-C does not wait). The flag stays until the sweep's client is closed (:func:`run_command`):
+    a task that starts all the same (a cancellation racing its start) stops at once; the next
+    sweep in the folder removes a flag left behind."""
     flag = sweep.out / STOP_FILE
     flag.touch()
     try:
-        waiting = [future for future, run in pending.items() if run["name"] not in running]
+        waiting = [future for future, run in pending.items() if not started(run)]
         client.cancel(waiting)
         for future in waiting:  # not started: they stay pending
             pending.pop(future)
@@ -637,7 +648,6 @@ def stop(sweep: Sweep, client: Any, pending: dict[Any, Any], collect: Callable[[
             time.sleep(0.1)
     finally:
         client.cancel(list(pending))
-        flag.unlink(missing_ok=True)
 
 
 def with_unsubscribe(client: Any) -> None:
@@ -753,6 +763,8 @@ def run_command(args: argparse.Namespace) -> int:
                 completed = execute(sweep, client, runs, progress=not args.quiet)
         except KeyboardInterrupt:  # while the cluster started or closed: the runs stay as they are
             completed = False
+        if not args.scheduler:  # the local cluster is closed: no task of this sweep can start any more
+            (sweep.out / STOP_FILE).unlink(missing_ok=True)
     sweep.to_do()  # runs that finished while the sweep stopped, or whose answer was lost, are done
     written = [sweep.save(), sweep.write_summary()]
     ensemble = sweep.write_ensemble()

@@ -197,6 +197,14 @@ class Cells:
         return (spread <= PLANAR_TOLERANCE * float(np.max(self.radii)) and flat(self.axes, 2)
                 and flat(self.momenta, 2) and flat(self.angular_momenta, slice(0, 2)))
 
+    def copy(self) -> Cells:
+        """The same cells, bit for bit, in arrays of their own (no validation again: a new
+        construction would renormalize the axes, changing their last bits)."""
+        out = object.__new__(type(self))
+        for name, value in vars(self).items():
+            object.__setattr__(out, name, value.copy() if isinstance(value, np.ndarray) else value)
+        return out
+
     def replace(self, **changes: Any) -> Cells:
         """A new, validated Cells with some arrays replaced (``dataclasses.replace``)."""
         return dataclasses.replace(self, **changes)

@@ -8,10 +8,14 @@ sphere per cell would make a single long rod touch everything.
 Narrow phase, vectorized over candidate pairs, in two parts: :func:`select_contacts` decides
 which contacts a pair gets (its *kinds*: the closest points of the two axis segments, and the
 ends of each segment with their closest points on the other; see :class:`Contacts`), and
-:func:`evaluate_contacts` computes them at the cells' positions. Rods lying side by side get the
-two ends of their overlap (one contact would let them turn through each other about it), skew
-rods the closest point; every contact is a true distance between two axis points, so none
-reports a separation below the pair's true one. No angle threshold is involved.
+:func:`evaluate_contacts` computes them at the cells' positions. A pair is one contact, at the
+closest points of its axes, as for any two convex bodies; only rods lying side by side (nearly
+parallel, with both ends of their overlap within reach) get the two ends of their overlap, since
+one contact would let them turn through each other about it. Every contact is a true distance
+between two axis points, so none reports a separation below the pair's true one. The closest
+points and their normal are computed without the ``1 − (â·b̂)²`` cancellation of the textbook
+formula (:func:`_closest_parameters`), exact to ~1e-16 rad in the normal also for nearly
+parallel rods and very short capsules.
 
 A pair is a contact when its separation is **at most** the margin: touching capsules (``d = 0``)
 count, with ``margin = 0`` too (as in the broad phase, and as MuJoCo counts them).
@@ -57,6 +61,15 @@ ROUNDING = 1e-9
 #: overlap 0.09–0.15 with ½, 0.055–0.063 with ¼; docs/model-notes.md). Smaller values bring no
 #: further gain and more nearly dependent rows.
 DUPLICATE_DISTANCE = 0.25
+#: Rods whose axes make an angle θ with ``sin θ`` at most this are *nearly parallel*: with two
+#: distinct ends of their overlap within reach they lie side by side and keep those ends
+#: (:func:`select_contacts`). A single contact lets a pair turn about it through about θ before
+#: the far end of their overlap meets; a step turns a colony cell through up to about this
+#: much (its tips by at most 0.2–0.3 of a diameter: ``turn_limit`` of the position step,
+#: ``cfl`` of ``simulate --step velocity``; for rods of 1.5–4 µm and radius 0.5 µm, 0.1–0.25
+#: rad), so closer to parallel than this a single contact could let them turn through each
+#: other within one step. docs/model-notes.md, "Contacts of a pair".
+SIDE_BY_SIDE_SINE = 0.2
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,18 +253,61 @@ def _check_pair_count(tree: cKDTree, points: np.ndarray, reach: float, n: int, m
 # ------------------------------------------------------------------------------------------
 # Narrow phase
 # ------------------------------------------------------------------------------------------
-def _closest_parameters(e, f, k, ha, hb):
-    """Axial coordinates ``(s, t)`` of the closest points of segments ``c_a + s â``,
-    ``s ∈ [−ha, ha]`` and ``c_b + t b̂``, ``t ∈ [−hb, hb]``, with ``e = â·(c_a − c_b)``,
-    ``f = b̂·(c_a − c_b)``, ``k = â·b̂``. Exact clamped minimization (clamp s, then t, then s)."""
-    denom = 1.0 - k * k
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s = np.where(denom > 1e-300, (f * k - e) / denom, 0.0)
+def _two_product(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``x·y = p + err`` exactly (Dekker's product with Veltkamp's split; |x|, |y| ≲ 1e150)."""
+    p = x * y
+    split = 134217729.0  # 2^27 + 1
+    xc, yc = split * x, split * y
+    xh, yh = xc - (xc - x), yc - (yc - y)
+    xl, yl = x - xh, y - yh
+    return p, ((xh * yh - p) + xh * yl + xl * yh) + xl * yl
+
+
+def axis_cross(ax: np.ndarray, bx: np.ndarray) -> np.ndarray:
+    """``â × b̂`` to full relative precision, also for nearly parallel axes, where the plain
+    product loses it (each component is a difference of nearly equal products: relative error
+    ~1e-16/θ for an angle θ; the common normal of rods at θ = 1e-8 would be off by 1e-8 rad)."""
+    out = np.empty_like(ax)
+    for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):
+        p1, e1 = _two_product(ax[:, j], bx[:, k])
+        p2, e2 = _two_product(ax[:, k], bx[:, j])
+        out[:, i] = (p1 - p2) + (e1 - e2)  # p1 − p2 is exact where it cancels (Sterbenz)
+    return out
+
+
+def _closest_parameters(r, ax, bx, ha, hb, w=None):
+    """Axial coordinates ``(s, t)`` of the closest points of the segments ``c_a + s â``,
+    ``s ∈ [−ha, ha]``, and ``c_b + t b̂``, ``t ∈ [−hb, hb]`` (``r = c_a − c_b``), and a mask of the
+    pairs whose closest points lie inside both segments.
+
+    Clamped minimization (clamp s, then t, then s), started from the closest points of the two
+    lines written with ``w = â × b̂`` (:func:`axis_cross`): ``s = w·(b̂ × r)/|w|²``,
+    ``t = w·(â × r)/|w|²``. The textbook form ``(f k − e)/(1 − k²)`` (``k = â·b̂``) loses all
+    precision in ``1 − k²`` for nearly parallel rods (relative error 1e-16/θ², against 1e-16/θ
+    here). Then one refinement from the residual ``q_a − q_b`` (the same formulas with ``r``
+    replaced by it, or the foot of the free point for a clamped one): the error of ``s``, ``t``
+    is then that of the residual, not of the centre difference."""
+    w = axis_cross(ax, bx) if w is None else w
+    ww = np.einsum("ij,ij->i", w, w)
+    lines = ww > 0.0
+    safe = np.where(lines, ww, 1.0)
+    k = np.einsum("ij,ij->i", ax, bx)
+    e, f = np.einsum("ij,ij->i", ax, r), np.einsum("ij,ij->i", bx, r)
+    s = np.where(lines, np.einsum("ij,ij->i", w, np.cross(bx, r)) / safe, 0.0)
     s = np.clip(s, -ha, ha)
     t = f + s * k
     tc = np.clip(t, -hb, hb)
     s = np.where(t != tc, np.clip(tc * k - e, -ha, ha), s)
-    return s, tc
+    free_s, free_t = np.abs(s) < ha, np.abs(tc) < hb
+    inside = free_s & free_t & lines
+    diff = r + s[:, None] * ax - tc[:, None] * bx
+    # Refinement on the active set: both free, a Newton step of the 2 × 2 system; one free, its
+    # foot. (s, t stay within their segments: the correction is of the order of the rounding.)
+    ds = np.where(inside, np.einsum("ij,ij->i", w, np.cross(bx, diff)) / safe,
+                  np.where(free_s & ~free_t, -np.einsum("ij,ij->i", ax, diff), 0.0))
+    dt = np.where(inside, np.einsum("ij,ij->i", w, np.cross(ax, diff)) / safe,
+                  np.where(free_t & ~free_s, np.einsum("ij,ij->i", bx, diff), 0.0))
+    return np.clip(s + ds, -ha, ha), np.clip(tc + dt, -hb, hb), inside
 
 
 def _fallback_normals(cells: Cells, a: np.ndarray, b: np.ndarray, planar: bool) -> np.ndarray:
@@ -310,30 +366,39 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *,
                     always_closest: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which contacts each candidate pair gets: ``(a, b, kind)``, one entry per contact.
 
-    For every pair the five kinds of :class:`Contacts` are considered (the closest points of the
-    two axis segments, and each end of each segment with its closest point on the other). Each
-    is a true distance between a point of a's axis and a point of b's axis, so no contact's
-    separation is below the true separation of the pair, and kind 0 is the true one. Selection:
+    A pair is one contact, at the closest points of its axes (kind 0), unless its rods lie *side
+    by side*: then it gets the two ends of their overlap (kinds 1–4), and the closest points too
+    where they are nearer. Side by side means
 
-    - an end kind is a candidate only when both segments have length > 0 and the end projects
-      into the other segment (unclamped, to rounding ``ROUNDING·(ρ_a + ρ_b)``, 1e-9);
-    - a kind is kept when its separation is at most ``margin`` (touching counts);
-    - kind 0 is dropped when a kept end has the same (to rounding) or a smaller separation: that
-      end represents the minimum (exactly parallel rods thus keep two contacts, not three);
-    - an end is dropped when both its ``s`` and ``t`` lie within ``DUPLICATE_DISTANCE·(ρ_a +
-      ρ_b)`` (¼) of a contact of the same pair kept before it (the one with the smallest
-      separation first): near-duplicate rows make the Delassus operator singular;
-    - a pair within the margin left with nothing keeps kind 0.
+    - nearly parallel: ``sin θ <= SIDE_BY_SIDE_SINE`` (0.2) for the angle θ between the axes, and
+    - both ends of the overlap within reach: two end kinds, each an end of one segment that
+      projects into the other (unclamped, to rounding ``ROUNDING·(ρ_a + ρ_b)``), with separation
+      at most ``margin``, and not near duplicates of each other (their ``s`` or ``t`` differ by
+      more than ``DUPLICATE_DISTANCE·(ρ_a + ρ_b)``).
 
-    Rods lying side by side thus get the two ends of their overlap (they cannot turn through
-    each other about one point); skew rods the crossing point plus any end within the margin.
-    No angle threshold; the only lengths are the cells' own radii.
+    Why: for a skew pair the distance grows away from the closest points on every side, the
+    closest points move continuously as the cells move, and one contact is the physics of two
+    convex bodies (one normal, one impulse; the plain solve then gives the two-body impulse; as
+    MuJoCo counts capsule pairs). Extra contacts at the ends of a skew pair's overlap over-
+    constrain it: the plain solve then pulled at some of them (issue 19). For rods lying side by
+    side the distance is nearly the same along the whole overlap and the closest point jumps from
+    one end to the other as they turn: a single contact lets them turn about it through about θ,
+    and a step turns a colony cell through up to about 0.2 rad (see :data:`SIDE_BY_SIDE_SINE`),
+    so they need both ends. Each contact is a true distance between a point of a's axis and a
+    point of b's, so none reports a separation below the pair's true one. Among the contacts of
+    a side-by-side pair: kind 0 is dropped when a kept end has the same (to rounding) or a
+    smaller separation (exactly parallel rods thus keep two contacts, not three), and an end is
+    dropped when both its ``s`` and ``t`` lie within ``DUPLICATE_DISTANCE·(ρ_a + ρ_b)`` (¼) of a
+    contact of the same pair kept before it (the one with the smallest separation first):
+    near-duplicate rows make the Delassus operator singular.
 
-    With ``always_closest`` (the position-level step), kind 0 is kept whenever the pair is within
-    the margin and ends are compared as duplicates only with each other: across the linearizations
-    of a step the closest point moves along the pair, and only kind 0 follows it (an end that
-    stood in for it may no longer be the nearest point, and a new overlap elsewhere on the pair
-    would go unseen); the redundant rows this keeps cost an interior-point solver nothing.
+    With ``always_closest`` (the position-level step, which linearizes the distance of every pair
+    at several points) the side-by-side test is not made: kind 0 is kept for every pair within the
+    margin, every end within reach is kept, and ends are compared as duplicates only with each
+    other: across the linearizations of a step the closest point moves along the pair, and only
+    kind 0 follows it (an end that stood in for it may no longer be the nearest point, and a new
+    overlap elsewhere on the pair would go unseen); the redundant rows this keeps cost an
+    interior-point solver nothing.
 
     Args:
         cells: the cells.
@@ -352,7 +417,7 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *,
     a, b = pairs[:, 0], pairs[:, 1]
     r, ax, bx, e, f, k, ha, hb = _pair_projections(cells, a, b)
     rho = cells.radii[a] + cells.radii[b]
-    s0, t0 = _closest_parameters(e, f, k, ha, hb)
+    s0, t0, _ = _closest_parameters(r, ax, bx, ha, hb)
     separation0 = _axis_distances(r, ax, bx, s0, t0) - rho
     # No contact of a pair is nearer than kind 0: pairs beyond the margin are done.
     within = np.flatnonzero(separation0 <= margin)
@@ -369,6 +434,17 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *,
         rows = np.flatnonzero(rods & (np.abs(projection) <= other + rounding))
         separation[rows, kind] = _axis_distances(r[rows], ax[rows], bx[rows], s[rows, kind], t[rows, kind]) - rho[rows]
     keep = separation <= margin
+    near = DUPLICATE_DISTANCE * rho
+    if not always_closest:
+        # Only rods lying side by side keep ends (docstring); every other pair is one contact, at
+        # its closest points, as for any two convex bodies.
+        distinct = np.zeros(a.size, dtype=bool)
+        for j in range(2, PAIR_KINDS):
+            for i in range(1, j):
+                apart = (np.abs(s[:, j] - s[:, i]) > near) | (np.abs(t[:, j] - t[:, i]) > near)
+                distinct |= keep[:, i] & keep[:, j] & apart
+        sine = np.linalg.norm(axis_cross(ax, bx), axis=1)
+        keep[~(distinct & (sine <= SIDE_BY_SIDE_SINE)), 1:] = False
     # Kind 0 is represented by the nearest kept end when that end is as close (to rounding).
     ends = np.where(keep[:, 1:], separation[:, 1:], np.inf)
     nearest_end = 1 + np.argmin(ends, axis=1)
@@ -381,7 +457,6 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *,
     order[swap, 0], order[swap, nearest_end[swap]] = nearest_end[swap], 0
     rows = np.arange(a.size)[:, None]
     s_o, t_o, keep_o = s[rows, order], t[rows, order], keep[rows, order]
-    near = DUPLICATE_DISTANCE * rho
     for j in range(1, PAIR_KINDS):
         for i in range(1 if always_closest else 0, j):
             duplicate = keep_o[:, i] & (np.abs(s_o[:, j] - s_o[:, i]) <= near) & (np.abs(t_o[:, j] - t_o[:, i]) <= near)
@@ -430,8 +505,16 @@ def evaluate_contacts(cells: Cells, a: np.ndarray, b: np.ndarray, kind: np.ndarr
         return Contacts.empty()
     r, ax, bx, e, f, k, ha, hb = _pair_projections(cells, a, b)
     s, t = _end_parameters(np.maximum(kind, 1), e, f, k, ha, hb)[:2]
+    # An end's foot on the other segment, refined once from the residual (its error is then that
+    # of the residual, not of the centre difference).
+    on_a, on_b = (kind >= 1) & (kind <= 2), kind >= 3
+    rough = r + s[:, None] * ax - t[:, None] * bx
+    t = np.where(on_a & (np.abs(t) < hb), np.clip(t + np.einsum("ij,ij->i", bx, rough), -hb, hb), t)
+    s = np.where(on_b & (np.abs(s) < ha), np.clip(s - np.einsum("ij,ij->i", ax, rough), -ha, ha), s)
     closest = np.flatnonzero(kind == 0)
-    s[closest], t[closest] = _closest_parameters(e[closest], f[closest], k[closest], ha[closest], hb[closest])
+    w = axis_cross(ax[closest], bx[closest])
+    s[closest], t[closest], inside = _closest_parameters(r[closest], ax[closest], bx[closest], ha[closest],
+                                                         hb[closest], w)
     diff = r + s[:, None] * ax - t[:, None] * bx
     dist = np.linalg.norm(diff, axis=1)
     rho_a, rho_b = cells.radii[a], cells.radii[b]
@@ -439,6 +522,16 @@ def evaluate_contacts(cells: Cells, a: np.ndarray, b: np.ndarray, kind: np.ndarr
     degenerate = dist <= 1e-12 * (rho_a + rho_b)
     with np.errstate(invalid="ignore", divide="ignore"):
         normal = diff / dist[:, None]
+    if not planar:
+        # Closest points inside both segments: the normal is the common perpendicular â × b̂
+        # exactly; from it, not from q_a − q_b, whose direction for nearly parallel rods carries
+        # the error of s along the rods times the angle (issue 19: 6e-6 rad at θ = 4e-9).
+        # (Planar scenes: two rods of a monolayer meet inside both segments only where their
+        # axes cross, a degenerate contact.)
+        common = closest[inside & ~degenerate[closest]]
+        wc = w[inside & ~degenerate[closest]]
+        side = np.sign(np.einsum("ij,ij->i", wc, diff[common]))
+        normal[common] = (side / np.linalg.norm(wc, axis=1))[:, None] * wc
     if degenerate.any():
         normal[degenerate] = _fallback_normals(cells, a[degenerate], b[degenerate], planar)
     offset_a = s[:, None] * ax - rho_a[:, None] * normal

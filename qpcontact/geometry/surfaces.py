@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks import number, sequence_of
+from ..checks import number, real_array, sequence_of
 from ..errors import InvalidArgumentError
 from .cells import Cells
 from .contacts import PLANE_MINUS_END, PLANE_PLUS_END, Contacts, concatenate, relative_normal_velocity
@@ -35,8 +35,8 @@ class Plane:
     normal: tuple[float, float, float]
 
     def __post_init__(self) -> None:
-        point = np.asarray(self.point, dtype=float)
-        normal = np.asarray(self.normal, dtype=float)
+        point = real_array("Plane.point", self.point, InvalidArgumentError)
+        normal = real_array("Plane.normal", self.normal, InvalidArgumentError)
         if point.shape != (3,) or not np.all(np.isfinite(point)):
             raise InvalidArgumentError(f"Plane.point: expected 3 finite numbers, got {self.point!r}")
         norm = float(np.linalg.norm(normal)) if normal.shape == (3,) else 0.0
@@ -47,14 +47,14 @@ class Plane:
 
 
 def substrate(height: float = 0.0) -> Plane:
-    """The plane ``z = height`` with cells above it (a surface under a 3D biofilm)."""
-    return Plane((0.0, 0.0, float(height)), (0.0, 0.0, 1.0))
+    """The plane ``z = height`` with cells above it (a surface under a 3D biofilm) [length]."""
+    return Plane((0.0, 0.0, number("height", height)), (0.0, 0.0, 1.0))
 
 
 def channel(width: float, center_y: float = 0.0) -> list[Plane]:
-    """Two walls ``y = center_y ± width/2`` facing each other (a channel along x)."""
-    if not (np.isfinite(width) and width > 0):
-        raise InvalidArgumentError(f"channel width: must be finite and > 0, got {width!r}")
+    """Two walls ``y = center_y ± width/2`` facing each other (a channel along x) [length]."""
+    width = number("channel width", width, minimum=0.0, open_minimum=True)
+    center_y = number("center_y", center_y)
     return [Plane((0.0, center_y - width / 2, 0.0), (0.0, 1.0, 0.0)),
             Plane((0.0, center_y + width / 2, 0.0), (0.0, -1.0, 0.0))]
 

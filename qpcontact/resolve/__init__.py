@@ -20,13 +20,23 @@ from .resolve import (
     SystemSolution,
     acceptance_failure,
     acceptance_limit,
+    certified,
     resolve,
     solve_system,
 )
-from .validation import ACTIVE_THRESHOLD, Agreement, active_set_polish, compare_with_linear, reference_solution
+from .validation import (
+    ACTIVE_THRESHOLD,
+    Agreement,
+    Reference,
+    UnverifiedReferenceWarning,
+    active_set_polish,
+    compare_with_linear,
+    reference,
+    reference_solution,
+)
 
 __all__ = [
-    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Result", "SystemSolution", "acceptance_failure", "acceptance_limit",
-    "active_set_polish",
-    "compare_with_linear", "metrics", "reference_solution", "resolve", "solve_system",
+    "ACCEPT_CAP", "ACCEPT_FACTOR", "ACTIVE_THRESHOLD", "Agreement", "Reference", "Result", "SystemSolution",
+    "UnverifiedReferenceWarning", "acceptance_failure", "acceptance_limit", "active_set_polish", "certified",
+    "compare_with_linear", "metrics", "reference", "reference_solution", "resolve", "solve_system",
 ]

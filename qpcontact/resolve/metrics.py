@@ -57,6 +57,28 @@ def multiplier_consistency(system: ContactSystem, y: np.ndarray, lam: np.ndarray
     return float(np.linalg.norm(y - system.matrix.T @ lam)) / norm if norm > 0 else 0.0
 
 
+def kkt_residuals(system: ContactSystem, y: np.ndarray, lam: np.ndarray) -> dict[str, float]:
+    """How far ``(ỹ, λ̃)`` is from satisfying the KKT conditions of the complementarity QP
+    ``min ½‖ỹ‖²  s.t. B̃ỹ ≥ b̃`` (model.md): a certificate of optimality that needs no other
+    solver, since the QP is strictly convex and its KKT point is the unique optimum. Scaled units
+    (``max b̃ = 1``); impulses relative to ``max(max |λ̃|, 1)``, ``ỹ`` to ``max(‖ỹ‖, 1)``:
+
+    - ``stationarity``: ``‖ỹ − B̃ᵀλ̃‖`` (the impulses are equal and opposite contact impulses);
+    - ``primal``: ``max(0, max(b̃ − B̃ỹ))`` (no contact approaches: the penetration);
+    - ``dual``: ``max(0, −min λ̃)`` (no contact pulls);
+    - ``complementarity``: ``max_k |λ̃_k (B̃ỹ − b̃)_k|`` (a contact that pushes is exactly stopped).
+
+    All four are 0 exactly at the optimum."""
+    slack = system.matrix @ y - system.rhs
+    scale = max(float(np.abs(lam).max(initial=0.0)), 1.0)
+    return {
+        "stationarity": float(np.linalg.norm(y - system.matrix.T @ lam)) / max(float(np.linalg.norm(y)), 1.0),
+        "primal": max(0.0, -float(slack.min(initial=0.0))),
+        "dual": max(0.0, -float(lam.min(initial=0.0))) / scale,
+        "complementarity": float(np.max(np.abs(lam * slack), initial=0.0)) / scale,
+    }
+
+
 def distance(y: np.ndarray, reference: np.ndarray) -> float:
     """``‖x − x*‖_W / ‖x*‖_W`` (``= ‖ỹ − ỹ*‖/‖ỹ*‖`` in the scaled unknowns)."""
     norm = float(np.linalg.norm(reference))

@@ -45,13 +45,15 @@ class Result:
     Attributes:
         impulses: (N, 7) ``(Δp_x, Δp_y, Δp_z, ΔL_x, ΔL_y, ΔL_z, Δg)`` per cell; zeros for cells
             left out [momentum units].
-        cells: the cells with the impulses applied (the input cells, unchanged, when the result
-            is not converged).
+        cells: the cells with the impulses applied (a copy of the input cells, unchanged, when
+            the result is not converged).
         contacts: the colliding contacts that entered the system (row order).
         contact_impulses: (K,) normal impulse ``λ_k`` at each colliding contact [momentum], or
             None where the solver gives none.
         solver, formulation, form: what was solved and how.
-        converged: the solver reported success and the answer passed the checks.
+        converged: the answer passed the checks (:func:`acceptance_failure`) and the solver
+            reported success, or, for complementarity, whatever the solver's status word (the
+            checks certify such an answer: :func:`certified`; ``status`` then says so).
         status: the solver's own status text (``"no_contact"`` when nothing collided).
         iterations: solver iterations where known.
         times: seconds per phase: ``detect``, ``assemble``, ``setup``, ``solve``, ``check``,
@@ -170,7 +172,8 @@ class SystemSolution:
     Attributes:
         y: the scaled unknowns ``ỹ`` (None if the solver returned no answer).
         lam: the scaled contact impulses ``λ̃`` with ``ỹ = B̃ᵀλ̃`` (None where the solver gives none).
-        converged: the solver reported success and the answer passed the acceptance checks.
+        converged: the answer passed the acceptance checks and the solver reported success (or,
+            for a formulation they certify, :func:`certified`, whatever its status word).
         status: the solver's own status text (``"... (again at T)"`` after the retry).
         iterations: solver iterations where known.
         setup_seconds, solve_seconds: time in the solver's setup and solve [s] (both attempts).
@@ -194,6 +197,15 @@ class SystemSolution:
     extras: dict[str, Any] = field(default_factory=dict)
 
 
+def certified(formulation: str) -> bool:
+    """Whether :func:`acceptance_failure` certifies an answer of this formulation by itself, so
+    that it is accepted whatever the solver's status word: complementarity, whose checks are its
+    KKT conditions (penetration = primal feasibility, sign of λ = dual feasibility,
+    complementarity residual and duality gap, ỹ = B̃ᵀλ̃). Not least_squares (optimality is not
+    checked where ``Mx = b`` has no solution) nor the plain solve (its own test decides)."""
+    return formulation == "complementarity"
+
+
 def solve_system(
     system: ContactSystem,
     *,
@@ -207,7 +219,9 @@ def solve_system(
     estimate_condition: bool = False,
 ) -> SystemSolution:
     """Solve an assembled system with a registered solver and check the answer
-    (:func:`acceptance_failure`); an answer the solver calls converged but that fails the checks
+    (:func:`acceptance_failure`); an answer the solver does not call converged is accepted when
+    the checks certify it (:func:`certified`: complementarity), whatever the status word;
+    an answer the solver calls converged but that fails the checks
     is solved for once more at ``RETRY_FACTOR·tolerance`` (within what is left of
     ``time_limit``) and kept if it passes them at ``tolerance``. Used by :func:`resolve` and by
     the studies (which assemble once and solve many times).
@@ -232,7 +246,17 @@ def solve_system(
     if out.y is None:
         failure = out.error or f"{solver} returned no solution (status {out.status})"
     elif not out.found:
-        failure = f"{solver} did not converge (status {out.status})"
+        # The status word is the backend's own stopping test, not the promise: an answer whose
+        # residuals certify it (the KKT conditions of complementarity) is accepted whatever the
+        # word (issue 19: Clarabel's "AlmostSolved" at penetration 1e-9, complementarity 3e-8 on
+        # examples/channel.py). least_squares' checks do not certify optimality where Mx = b has
+        # no solution, so there the word stands.
+        failure = acceptance_failure(system, formulation, out.y, out.lam, tolerance) if certified(formulation) else (
+            "its formulation's checks do not certify an answer")
+        if failure:
+            failure = f"{solver} did not converge (status {out.status}); {failure}"
+        else:
+            status = f"{out.status} (accepted by its residuals)"
     else:
         failure = acceptance_failure(system, formulation, out.y, out.lam, tolerance)
         left = None if time_limit is None else time_limit - (time.perf_counter() - start)
@@ -357,7 +381,7 @@ def resolve(
     t_detect = time.perf_counter()
     n_cells = cells.n
     if len(active) == 0:  # nothing to solve: never hand an unconstrained QP to a backend
-        return Result(np.zeros((n_cells, 7)), cells, active, np.zeros(0), solver, solved, solved_form, True,
+        return Result(np.zeros((n_cells, 7)), cells.copy(), active, np.zeros(0), solver, solved, solved_form, True,
                       "no_contact", 0,
                       {"detect": t_detect - t_start, "assemble": 0.0, "setup": 0.0, "solve": 0.0, "check": 0.0,
                        "total": time.perf_counter() - t_start}, {"penetration": 0.0}, 0, bool(planar))
@@ -385,7 +409,8 @@ def resolve(
     converged = solution.converged
     result = Result(
         impulses=impulses,
-        cells=cells.with_impulses(impulses) if converged else cells,
+        # Unconverged: a copy of the caller's cells, never the object itself (issue 19).
+        cells=cells.with_impulses(impulses) if converged else cells.copy(),
         contacts=active,
         contact_impulses=contact_impulses,
         solver=solver,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -84,13 +85,39 @@ def active_set_polish(system: ContactSystem, lam: np.ndarray, *,
     return None
 
 
-def reference_solution(system: ContactSystem, formulation: str, *, tolerance: float = 1e-10,
-                       guess: np.ndarray | None = None) -> np.ndarray:
-    """A high-accuracy ``ỹ*`` for a formulation: the linear solve for the plain problem
-    (``"linear"``) and wherever it already satisfies the formulation's optimality conditions
-    (all contacts active), else Clarabel at ``tolerance`` followed by an exact active-set polish
-    (of Clarabel's contact impulses, else of MPRGP's) that is kept only if it verifies (feasible,
-    and for complementarity, non-negative contact impulses).
+class UnverifiedReferenceWarning(UserWarning):
+    """:func:`reference_solution` could not verify its answer (no active-set polish satisfied
+    the KKT conditions): it returned Clarabel's own answer, which is then no independent
+    reference for grading Clarabel (or anything to better than Clarabel's tolerance)."""
+
+
+@dataclass
+class Reference:
+    """A reference solution (:func:`reference`).
+
+    Attributes:
+        y: the scaled unknowns ``ỹ*``.
+        method: how it was found (``"linear solve"``, ``"active-set polish of <solver>"``,
+            ``"clarabel, unpolished"``).
+        verified: it satisfies the formulation's optimality conditions to 1e-12 (the linear
+            solve, consistent and, for complementarity, with every impulse pushing; or an
+            active-set polish that verified), so it is the optimum whatever solver guessed it;
+            False: only a solver's answer at its tolerance.
+    """
+
+    y: np.ndarray
+    method: str
+    verified: bool
+
+
+def reference(system: ContactSystem, formulation: str, *, tolerance: float = 1e-10,
+              guess: np.ndarray | None = None) -> Reference:
+    """A high-accuracy ``ỹ*`` for a formulation, and how it was found: the linear solve for the
+    plain problem (``"linear"``) and wherever it already satisfies the formulation's optimality
+    conditions (all contacts active), else Clarabel at ``tolerance`` followed by an exact
+    active-set polish (of Clarabel's contact impulses, else of MPRGP's) that is kept only if it
+    verifies (feasible, and for complementarity, non-negative contact impulses). When no polish
+    verifies, Clarabel's answer is returned with ``verified=False``.
 
     ``guess``: contact impulses ``λ̃`` from a faster solve (complementarity only). If the polish of
     their active set verifies (:func:`active_set_polish`), that exact optimum is returned and the
@@ -98,23 +125,40 @@ def reference_solution(system: ContactSystem, formulation: str, *, tolerance: fl
     # At 1e-12 LSMR cannot certify the least-squares answer of a jammed packing (it stops at 3e-11).
     lin = solve_min_norm(system.matrix, system.rhs, tolerance=min(tolerance, 1e-10))
     if formulation == "linear" or (formulation == "least_squares" and lin.consistent):
-        return lin.y
+        return Reference(lin.y, "linear solve", lin.consistent or formulation == "linear")
     if formulation == "complementarity" and lin.consistent and np.all(lin.lam > 0):
-        return lin.y
+        return Reference(lin.y, "linear solve (every contact pushes)", True)
     if formulation == "complementarity" and guess is not None:
         polished = active_set_polish(system, guess)
         if polished is not None:
-            return polished
+            return Reference(polished, "active-set polish of the guess", True)
     out = solve(Problem.of(system), "clarabel", formulation, "primal", tolerance=tolerance)
     if out.y is None:
         raise RuntimeError(f"reference solve failed: {out.status} {out.error or ''}")
     if formulation != "complementarity" or out.lam is None:
-        return out.y  # least_squares: Clarabel's answer (its r ≥ 0 part has no simple active-set polish)
+        # least_squares: Clarabel's answer (its r ≥ 0 part has no simple active-set polish)
+        return Reference(out.y, "clarabel, unpolished", False)
     polished = active_set_polish(system, out.lam)
-    if polished is None:
-        # Redundant contacts (side-by-side rods in a loop: Ã singular to 1e-6) leave the contact
-        # impulses non-unique; an interior point spreads them, so its active set may not verify,
-        # while MPRGP's vertex-like answer does.
-        second = solve(Problem.of(system), "mprgp", formulation, "contact", tolerance=min(tolerance, 1e-12))
-        polished = active_set_polish(system, second.lam) if second.lam is not None else None
-    return out.y if polished is None else polished
+    if polished is not None:
+        return Reference(polished, "active-set polish of clarabel", True)
+    # Redundant contacts (side-by-side rods in a loop: Ã singular to 1e-6) leave the contact
+    # impulses non-unique; an interior point spreads them, so its active set may not verify,
+    # while MPRGP's vertex-like answer does.
+    second = solve(Problem.of(system), "mprgp", formulation, "contact", tolerance=min(tolerance, 1e-12))
+    polished = active_set_polish(system, second.lam) if second.lam is not None else None
+    if polished is not None:
+        return Reference(polished, "active-set polish of mprgp", True)
+    return Reference(out.y, "clarabel, unpolished", False)
+
+
+def reference_solution(system: ContactSystem, formulation: str, *, tolerance: float = 1e-10,
+                       guess: np.ndarray | None = None) -> np.ndarray:
+    """``reference(...).y`` (:func:`reference`); warns (:class:`UnverifiedReferenceWarning`) when
+    the answer could not be verified, i.e. when it is Clarabel's own answer, never silently.
+    Least-squares answers of inconsistent systems have no verification and do not warn (their
+    reference is Clarabel at ``tolerance``, documented as such)."""
+    found = reference(system, formulation, tolerance=tolerance, guess=guess)
+    if not found.verified and formulation == "complementarity":
+        warnings.warn(f"reference_solution: no active-set polish verified; this is {found.method}'s answer at "
+                      f"tolerance {tolerance:g}, not an independent reference", UnverifiedReferenceWarning, stacklevel=2)
+    return found.y

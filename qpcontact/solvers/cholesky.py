@@ -99,7 +99,12 @@ class GramMatrix:
         self.row = (np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)).astype(np.int32)
         # The pattern (with the whole diagonal) in CSC order, lower triangle; each product's place
         # in it by a binary search of its (column, row) key.
-        pattern = sp.tril(abs(csr.T) @ abs(csr) + sp.identity(n, format="csc"), format="csc")
+        # From the structure, not the values: a product of stored zeros is dropped by scipy's
+        # matmul, and a refresh (:meth:`refresh`) may fill them (a planar step's Jacobian has
+        # zeros where the next step's has values).
+        structure = csr.copy()
+        structure.data = np.ones_like(structure.data)
+        pattern = sp.tril(structure.T @ structure + sp.identity(n, format="csc"), format="csc")
         pattern.sort_indices()
         keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
         self.position = np.searchsorted(keys, column_j.astype(np.int64) * n + column_i).astype(np.int64)

@@ -417,8 +417,11 @@ def solve_by_blocks(
     blocks of about :data:`qpcontact.solvers.blocks.BLOCK_ROWS` contacts
     (:func:`~qpcontact.solvers.blocks.independent_blocks`): the same problem, but each part stops
     when it has converged instead of waiting for the hardest one. Each block gets the time that
-    is left of ``time_limit``. ``found`` is true only if every block was solved; when one fails,
-    the output carries no ``ỹ`` (a block's answer covers only its own rows and columns).
+    is left of ``time_limit``. ``found`` is true only if every block was solved; when a block
+    returns no answer, the output carries no ``ỹ`` (a block's answer covers only its own rows
+    and columns); a block that returns an answer without its solver's success flag (Clarabel's
+    "AlmostSolved") keeps it, so that the caller can judge the whole answer by its residuals
+    (:func:`qpcontact.resolve.resolve.solve_system`).
     ``iterations`` is the largest of the blocks'. ``split=False`` solves the whole problem in
     one call (``extras["blocks"] = 1``)."""
     k, n = problem.shape
@@ -431,7 +434,7 @@ def solve_by_blocks(
         out.extras["blocks"] = 1
         return out
     y, lam = np.zeros(n), np.zeros(k)
-    has_lam = True
+    has_lam, found = True, True
     statuses: list[str] = []
     iterations: list[int] = []
     setup, solve_seconds = time.perf_counter() - t0, 0.0
@@ -450,9 +453,10 @@ def solve_by_blocks(
         out = spec.solve(sub, formulation, form, tolerance=tolerance, time_limit=limit, settings=settings,
                          initial=guess)
         setup, solve_seconds = setup + out.setup_seconds, solve_seconds + out.solve_seconds
-        if out.y is None or not out.found:
+        if out.y is None:
             return SolverOutput(None, None, False, f"{out.status} (block of {rows.size} contacts)", out.iterations,
                                 setup, solve_seconds, error=out.error)
+        found = found and out.found
         y[cols] = out.y
         if out.lam is None:
             has_lam = False
@@ -462,5 +466,5 @@ def solve_by_blocks(
         if out.iterations is not None:
             iterations.append(out.iterations)
     status = " / ".join(dict.fromkeys(statuses))
-    return SolverOutput(y, lam if has_lam else None, True, status, max(iterations, default=None), setup,
+    return SolverOutput(y, lam if has_lam else None, found, status, max(iterations, default=None), setup,
                         solve_seconds, extras={"blocks": len(parts)})

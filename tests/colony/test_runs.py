@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
@@ -20,6 +19,7 @@ from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder, read
 from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.colony.snapshots import load_snapshot
 from qpcontact.errors import OutputFolderError
+from tests.helpers import default_signals, gate_model, wait_for
 
 #: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
 SETTINGS = Settings().updated({"cells": 10**6, "dimensions": 3, "max_dt": 0.1, "growth_per_step": 0.1, "max_steps": 48})
@@ -76,34 +76,45 @@ def test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one(tmp_path, m
     assert history(tmp_path / "part") == history(tmp_path / "full")  # appended, one row per step
 
 
-@pytest.mark.slow
-def test_ctrl_c_stops_simulate_cleanly_and_resume_continues_it(tmp_path):
-    """Before: a KeyboardInterrupt traceback, no history, no pictures, no snapshot."""
+def held_run(tmp_path, step, *argv):
+    """``qpcontact simulate`` in its own process, held by a gate model at ``step`` (inside the
+    step: tests/helpers.py::gate_model); returns the process once it is held there."""
+    gate = gate_model(tmp_path, step)
     out = tmp_path / "run"
-    command = [sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out), "--quiet",
-               "--snapshot-every", "0", "--max-dt", "0.1"]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and process.poll() is None:
-        # a header and at least five rows
-        if (out / "history.csv").exists() and len((out / "history.csv").read_text().splitlines()) > 5:
-            break
-        time.sleep(0.05)
-    process.send_signal(signal.SIGINT)
+    process = subprocess.Popen([sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out),
+                                "--quiet", "--max-dt", "0.1", "--hook", str(gate), *argv],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_signals)
+    try:
+        wait_for(lambda: (tmp_path / "held").exists() or process.poll() is not None, "the run held at its gate", 120)
+    except BaseException:
+        process.kill()
+        raise
+    assert process.poll() is None, process.communicate()[1]
+    return process, out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("signal_number, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_ctrl_c_or_sigterm_stops_simulate_cleanly_and_resume_continues_it(tmp_path, signal_number, status):
+    """Before: a KeyboardInterrupt traceback, no history, no pictures, no snapshot. The signal
+    lands at a known step (the run is held inside step 6 by its model: no race with the machine's
+    speed), so that step is abandoned and the state after six steps is saved."""
+    process, out = held_run(tmp_path, 6, "--snapshot-every", "0")
+    process.send_signal(signal_number)
     stdout, stderr = process.communicate(timeout=120)
-    assert process.returncode == 130, stderr
-    assert "Traceback" not in stderr and "--resume --out" in stderr
+    assert process.returncode == status, stderr
+    assert "Traceback" not in stderr and f"stopped by signal {int(signal_number)} at step 6" in stderr
+    assert "--resume --out" in stderr
     snapshots = sorted((out / "snapshots").glob("step_*.npz"))
-    assert len(snapshots) == 1
-    step = load_snapshot(snapshots[0]).step
-    assert len(history(out)) == step >= 5
+    assert [p.name for p in snapshots] == ["step_000006.npz"]
+    assert load_snapshot(snapshots[0]).step == 6 and len(history(out)) == 6
     for name in ("colony.png", "history.png", "config.toml"):
         assert (out / name).stat().st_size > 0, name
     assert str(snapshots[0].parent) in stdout  # it says what it wrote
 
-    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", str(step + 3)]) == 0
-    assert [int(row["step"]) for row in history(out)] == list(range(step + 3))
-    assert load_snapshot(out / "snapshots" / f"step_{step + 3:06d}.npz").step == step + 3
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "9"]) == 0
+    assert [int(row["step"]) for row in history(out)] == list(range(9))
+    assert load_snapshot(out / "snapshots" / "step_000009.npz").step == 9
 
 
 def test_an_output_folder_that_cannot_be_written_fails_before_the_run(tmp_path, monkeypatch, capsys):
@@ -270,22 +281,17 @@ def test_settings_no_run_can_use_are_refused_when_made(change, message):
 
 @pytest.mark.slow
 def test_a_killed_run_leaves_whole_snapshots_and_resumes_with_a_contiguous_history(tmp_path):
-    """SIGKILL (no chance to save anything): the snapshots written so far are whole (written
-    atomically), the history may run past the last one, and --resume continues from it."""
-    out = tmp_path / "run"
-    process = subprocess.Popen([sys.executable, "-m", "qpcontact", "simulate", "--cells", "100000", "--out", str(out),
-                                "--quiet", "--snapshot-every", "3", "--max-dt", "0.1"],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and len(list((out / "snapshots").glob("step_*.npz"))) < 4:
-        time.sleep(0.02)
+    """SIGKILL (no chance to save anything), at a known step (held inside step 10 by its model):
+    the snapshots written so far are whole (written atomically), the history runs past the last
+    one, and --resume continues from it."""
+    process, out = held_run(tmp_path, 10, "--snapshot-every", "3")
     process.kill()
     process.wait(timeout=60)
     snapshots = sorted((out / "snapshots").glob("step_*.npz"))
-    assert all(load_snapshot(p).step == int(p.stem[5:]) for p in snapshots)  # none truncated
-    last = load_snapshot(snapshots[-1]).step
-    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", str(last + 4)]) == 0
-    assert [int(row["step"]) for row in history(out)] == list(range(last + 4))
+    assert [load_snapshot(p).step for p in snapshots] == [3, 6, 9]  # none truncated
+    assert len(history(out)) == 10
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == 0
+    assert [int(row["step"]) for row in history(out)] == list(range(13))
     assert not [p for p in out.rglob(".*.tmp")]
 
 

@@ -172,9 +172,13 @@ def test_a_missing_snapshot_is_a_named_error(tmp_path):
         load_cells(tmp_path / "nosuch.npz")
 
 
-def rewrite(path, **changes):
+def rewrite(path, keep_checksum=False, **changes):
+    """Write the file again with some arrays changed, as another tool would (without the
+    checksum, unless ``keep_checksum``: then it no longer matches the arrays)."""
     with np.load(path) as data:
         arrays = {name: data[name] for name in data.files}
+    if not keep_checksum:
+        arrays.pop("checksum", None)
     arrays.update(changes)
     for name in [k for k, v in changes.items() if v is None]:
         del arrays[name]
@@ -216,3 +220,55 @@ def test_cells_alone_load_back_equal_and_from_a_snapshot(tmp_path):
         for name in CELL_NAMES:
             np.testing.assert_array_equal(getattr(loaded, name), getattr(cells, name))
     assert [p.name for p in (tmp_path / "cache").iterdir()] == ["cells.npz"]  # written through a temporary file
+
+
+# ------------------------------------------------------------------------------------------
+# Issue 19, item 5: files that loaded silently or failed raw
+# ------------------------------------------------------------------------------------------
+def test_a_npy_file_is_a_named_error(tmp_path):
+    np.save(tmp_path / "a.npy", np.zeros(3))
+    for load in (load_colony, load_snapshot, load_cells):
+        with pytest.raises(InvalidSnapshotError, match="a single .npy array, not an NPZ snapshot"):
+            load(tmp_path / "a.npy")
+
+
+def test_a_snapshot_without_a_version_is_a_named_error(tmp_path):
+    path = save_colony(tmp_path / "s.npz", a_colony(), 1)
+    rewrite(path, version=None)
+    with pytest.raises(InvalidSnapshotError, match="misses version"):
+        load_colony(path)
+
+
+@pytest.mark.parametrize("load", [load_colony, load_cells])
+def test_a_snapshot_of_a_newer_format_is_refused_with_a_clear_message(tmp_path, load):
+    path = save_colony(tmp_path / "s.npz", a_colony(), 1)
+    rewrite(path, version=np.array(VERSION + 1))
+    with pytest.raises(InvalidSnapshotError, match=f"snapshot version {VERSION + 1} .newer than this qpcontact: update"):
+        load(path)
+
+
+@pytest.mark.parametrize("name", ["centers", "ids", "rates", "time", "extra.warm.impulse", "settings"])
+def test_a_snapshot_with_a_flipped_byte_in_an_array_is_refused(tmp_path, name):
+    """Arrays damaged and written again (the ZIP's CRC then matches): loaded silently before;
+    the checksum stored with the arrays refuses them now."""
+    path = save_colony(tmp_path / "s.npz", a_colony(), 1, settings={"seed": 1},
+                       extra={"warm.impulse": np.array([0.5, 0.25])})
+    assert_same_colony(load_colony(path)[0], a_colony())
+    with np.load(path) as data:
+        damaged = data[name].copy()
+    damaged.reshape(-1).view(np.uint8)[min(3, damaged.nbytes - 1)] ^= 0x10
+    rewrite(path, keep_checksum=True, **{name: damaged})
+    for load in (load_colony, load_cells):
+        with pytest.raises(InvalidSnapshotError, match="damaged: its arrays do not match the checksum"):
+            load(path)
+
+
+def test_snapshots_without_a_checksum_still_load(tmp_path):
+    """Written before the checksum existed (or by another tool)."""
+    path = save_colony(tmp_path / "s.npz", a_colony(), 4)
+    assert "checksum" in np.load(path).files
+    rewrite(path)
+    assert "checksum" not in np.load(path).files
+    colony, step = load_colony(path)
+    assert step == 4
+    assert_same_colony(colony, a_colony())

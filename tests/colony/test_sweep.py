@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.sweep_benchmark import wait_for
 from qpcontact import cli, cluster
 from qpcontact.colony import sweep
 from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
 from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.studies import harness
+from tests.helpers import default_signals, gate_model, wait_for
 
 distributed = pytest.importorskip("distributed")
 
@@ -247,26 +247,25 @@ def test_failed_runs_are_reported_by_name_with_their_error_and_resume_redoes_onl
 
 def _sweep_process(argv: list[str], log: Path) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "qpcontact", "sweep", "--quiet", *argv], cwd=ROOT,
-                            stdout=log.open("w"), stderr=subprocess.STDOUT)
+                            stdout=log.open("w"), stderr=subprocess.STDOUT, preexec_fn=default_signals)
 
 
 @pytest.mark.slow
 def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_path):
     """Ctrl-C stops the sweep (status 130); the run cut short continues from its snapshot; the
-    finished runs are not run again."""
+    finished runs are not run again. Deterministic: the second run is held at step 8 by its model
+    (tests/helpers.py::gate_model) until the sweep's stop flag appears, so the signal always lands
+    with one run done and one cut after its snapshot of step 5 (no race with the machine's speed)."""
     out = tmp_path / "sweep"
     names = ["seed-1", "seed-2", "seed-3"]
-    # Runs of 600 cells take seconds each: a smaller run (80 cells, a fraction of a second with the
-    # position step) could finish between the wait below and the signal.
-    process = _sweep_process(["--cells", "600", "--seeds", "1,2,3", "--snapshot-every", "5", "--workers", "1",
-                              "--out", str(out)], tmp_path / "first.log")
+    gates = tmp_path / "gates"
+    gates.mkdir()
+    gate = gate_model(gates, 8, stop_flag=out / sweep.STOP_FILE, skip_first=True)
+    process = _sweep_process(["--cells", "150", "--seeds", "1,2,3", "--snapshot-every", "5", "--workers", "1",
+                              "--hook", str(gate), "--out", str(out)], tmp_path / "first.log")
     try:
-        def one_done_and_one_cut() -> bool:
-            done = [n for n in names if (out / "runs" / n / sweep.RESULT_FILE).exists()]
-            started = [n for n in names if n not in done and RunFolder(out / "runs" / n).latest_snapshot() is not None]
-            return bool(done and started)
-
-        wait_for(one_done_and_one_cut, "a run done and another with a snapshot", PATIENCE)
+        wait_for(lambda: (gates / "held").exists() or process.poll() is not None, "the second run held", PATIENCE)
+        assert process.poll() is None, (tmp_path / "first.log").read_text()
         process.send_signal(signal.SIGINT)
         assert process.wait(PATIENCE) == 130, (tmp_path / "first.log").read_text()
     finally:
@@ -275,8 +274,16 @@ def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_pa
             process.wait()
     assert "interrupted; continue with: qpcontact sweep --resume" in (tmp_path / "first.log").read_text()
     done = [n for n in names if (out / "runs" / n / sweep.RESULT_FILE).exists()]
-    cut = [n for n in names if n not in done and RunFolder(out / "runs" / n).latest_snapshot() is not None]
-    assert done and cut and len(done) + len(cut) < 3
+
+    def reached(name: str) -> int:
+        latest = RunFolder(out / "runs" / name).latest_snapshot()
+        return -1 if latest is None else int(latest.stem[5:])
+
+    cut = [n for n in names if n not in done and reached(n) >= 5]
+    assert len(done) == 1 and len(cut) == 1, {n: reached(n) for n in names}
+    # the third: not started, or (a cancellation racing its start) stopped by the flag at once
+    assert all(reached(n) <= 0 for n in names if n not in done + cut)
+    assert not (out / sweep.STOP_FILE).exists()  # removed once the local cluster is closed
     assert sweep.main(["--resume", "--workers", "2", "--quiet", "--out", str(out)]) == 0
     summary = read_summary(out)
     assert all(row["status"] == "done" for row in summary.values())
@@ -285,9 +292,9 @@ def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_pa
         if name in done:
             assert starts == [0], name  # not redone
         elif name in cut:
-            assert len(starts) == 2 and starts[1] > 0, (name, starts)  # continued from its snapshot
+            assert len(starts) == 2 and starts[1] >= 5, (name, starts)  # continued from its snapshot
         else:
-            assert starts == [0], name
+            assert starts[-1] == 0, name
 
 
 @pytest.mark.slow
@@ -315,21 +322,19 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
                          "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{i}") for i in (1, 2)]
         out = tmp_path / "sweep"
         names = ["seed-1", "seed-2", "seed-3"]
-        client = _sweep_process(["--cells", "600", "--seeds", "1,2,3", "--snapshot-every", "5",
+        # The first run to reach step 8 is held there (after its snapshot of step 5) until its
+        # worker is killed: a known point, not a race with the machine's speed.
+        gates = tmp_path / "gates"
+        gates.mkdir()
+        gate = gate_model(gates, 8)
+        client = _sweep_process(["--cells", "150", "--seeds", "1,2,3", "--snapshot-every", "5", "--hook", str(gate),
                                  "--scheduler", str(scheduler_file), "--out", str(out)], logs / "sweep.log")
         processes.append(client)
         pids = {w.pid: w for w in workers}
-
-        def a_run_past_a_snapshot_on_a_worker() -> tuple[str, int] | None:
-            for name in names:
-                folder = out / "runs" / name
-                started = sweep.attempts_of(folder)
-                if started and not (folder / sweep.RESULT_FILE).exists() and RunFolder(folder).latest_snapshot():
-                    return name, started[-1]["pid"]
-            return None
-
-        victim, pid = wait_for(a_run_past_a_snapshot_on_a_worker, "a run with a snapshot", PATIENCE)
-        assert pid in pids
+        wait_for(lambda: (gates / "held").exists(), "a run held at step 8", PATIENCE)
+        pid = int((gates / "held").read_text())
+        victim = next(name for name in names if any(a["pid"] == pid for a in attempts(out, name)))
+        assert pid in pids and RunFolder(out / "runs" / victim).latest_snapshot() is not None
         os.kill(pid, signal.SIGKILL)
         pids[pid].wait(PATIENCE)
         assert client.wait(PATIENCE) == 0, (logs / "sweep.log").read_text()
@@ -347,11 +352,44 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
         else:
             assert len(starts) == 1, (name, starts)
     # The continued run is the uninterrupted run.
-    whole = sweep.run_task("whole", Settings().updated({"cells": 600, "seed": int(victim.split("-")[1])}).to_tables(),
-                           str(tmp_path / "whole"))
+    whole = sweep.run_task("whole", Settings().updated({"cells": 150, "seed": int(victim.split("-")[1]),
+                                                        "snapshot_every": 5}).to_tables(), str(tmp_path / "whole"))
     ours, theirs = RunFolder(out / "runs" / victim).read_history(), RunFolder(tmp_path / "whole").read_history()
     assert ours["max_overlap"] == theirs["max_overlap"] and ours["cells"] == theirs["cells"]
     assert int(summary[victim]["cells"]) == whole["cells"]
+
+
+@pytest.mark.slow
+def test_a_run_folder_is_locked_while_its_task_runs_and_freed_when_it_dies(tmp_path):
+    """Two tasks of one run must never write its folder at once (Dask may start a task again while
+    the first still runs): the first holds ``.run.lock`` for as long as it runs; killed, it frees
+    it, and the next task continues the run from its snapshot."""
+    import fcntl
+
+    folder = tmp_path / "run"
+    gate = gate_model(tmp_path, 8)
+    values = Settings().updated({"cells": 60, "seed": 2, "hook": str(gate), "snapshot_every": 5}).to_tables()
+    code = (f"from qpcontact.colony import sweep; sweep.run_task('r', {values!r}, {str(folder)!r})")
+    first = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(lambda: (tmp_path / "held").exists() or first.poll() is not None, "the task held at step 8",
+                 PATIENCE)
+        assert first.poll() is None, first.communicate()[1]
+        with open(folder / sweep.LOCK_FILE, "a") as fh:
+            with pytest.raises(BlockingIOError):  # held by the running task
+                fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            first.kill()
+            first.wait(PATIENCE)
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)  # freed by its death
+            fcntl.flock(fh, fcntl.LOCK_UN)
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.wait()
+    outcome = sweep.run_task("r", values, str(folder))
+    assert outcome["status"] == "done" and outcome["attempts"] == 2
+    assert [a["from_step"] for a in sweep.attempts_of(folder)] == [0, 5]
 
 
 def test_a_scheduler_that_does_not_answer_is_one_line(tmp_path, capsys, monkeypatch):

@@ -47,3 +47,23 @@ def test_refresh_takes_new_values_of_the_same_pattern_only():
     v = np.arange(A.shape[1], dtype=float)
     assert np.allclose(dense @ gram.factor(w, d)(v), v)
     assert not gram.refresh(random_rows(4))
+
+
+def test_a_pattern_with_stored_zeros_is_refilled_right_when_they_get_values():
+    """The pattern is the structure of A, stored zeros included: ipm reuses the last problem's
+    Gram matrix for a matrix of the same structure, and a stored zero there may hold a value
+    now. Before, the pattern came from the values (scipy's product drops exact zeros), the
+    refill put such products in other entries, and the factorization broke down (a 2-cell step
+    after a run of 788 steps: "ipm failed at linearization 0: breakdown")."""
+    A = random_rows(5, k=40, n=30)
+    zeroed = A.copy()
+    zeroed.data[::3] = 0.0  # stored, not removed
+    gram = GramMatrix(zeroed)
+    assert gram.size == GramMatrix(A).size
+    assert gram.refresh(A)
+    w, d = np.ones(A.shape[0]), np.ones(A.shape[1])
+    dense = (A.T @ A).toarray() + np.eye(A.shape[1])
+    stored = sp.csc_matrix((gram.values(w, d), (gram._rows, gram._cols)), shape=gram.shape).toarray()
+    assert np.allclose(stored, np.tril(dense))
+    v = np.arange(A.shape[1], dtype=float)
+    assert np.allclose(dense @ gram.factor(w, d)(v), v)
