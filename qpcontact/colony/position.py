@@ -193,11 +193,11 @@ class CellMotion:
         return cls(np.asarray(ids, dtype=np.int64).copy(), (end.centers - start.centers) / dt,
                    turning_vectors(start, dt, drive_and_impulses) / dt)
 
-    def predict(self, cells: Cells, ids: np.ndarray, dt: float, parents: np.ndarray | None = None) -> Cells:
-        """``cells`` moved by ``dt`` with the motion of their ids (or of their parents' ids, for
-        cells born since: daughters move with their mother); cells of unknown ids stay."""
-        if self.ids.size == 0 or cells.n == 0:
-            return cells
+    def velocities(self, ids: np.ndarray, parents: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) velocities and (N, 3) turning rates of the cells with these ids (or their
+        parents' ids); 0 for unknown ids."""
+        if self.ids.size == 0:
+            return np.zeros((len(ids), 3)), np.zeros((len(ids), 3))
         order = np.argsort(self.ids)
         known = self.ids[order]
 
@@ -208,9 +208,16 @@ class CellMotion:
         row = index_of(np.asarray(ids, dtype=np.int64))
         if parents is not None:
             row = np.where(row >= 0, row, index_of(np.asarray(parents, dtype=np.int64)))
-        moving = row >= 0
-        velocity = np.where(moving[:, None], self.velocity[np.maximum(row, 0)], 0.0)
-        turning = np.where(moving[:, None], self.turning[np.maximum(row, 0)], 0.0)
+        moving = (row >= 0)[:, None]
+        return (np.where(moving, self.velocity[np.maximum(row, 0)], 0.0),
+                np.where(moving, self.turning[np.maximum(row, 0)], 0.0))
+
+    def predict(self, cells: Cells, ids: np.ndarray, dt: float, parents: np.ndarray | None = None) -> Cells:
+        """``cells`` moved by ``dt`` with the motion of their ids (or of their parents' ids, for
+        cells born since: daughters move with their mother); cells of unknown ids stay."""
+        if self.ids.size == 0 or cells.n == 0:
+            return cells
+        velocity, turning = self.velocities(ids, parents)
         return cells.replace(centers=cells.centers + velocity * dt, axes=rotate(cells.axes, turning * dt))
 
 
