@@ -67,6 +67,7 @@ from ..geometry.contacts import (
 )
 from ..geometry.motion import left_jacobian, move, rotate, turning_vectors
 from ..geometry.surfaces import Plane, evaluate_plane_contacts, plane_contacts
+from ..resolve.resolve import acceptance_failure
 from ..solvers import Problem, SolverSpec, get_solver, solve
 
 __all__ = ["CellMotion", "ContactImpulses", "PositionSettings", "PositionStepResult", "move", "position_step"]
@@ -637,8 +638,14 @@ def position_step(
         out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial)
         times["solve"] += time.perf_counter() - t0
         progress.solver_iterations += out.iterations or 0
-        if not out.found or out.y is None or not np.all(np.isfinite(out.y)):
-            message = f"{settings.solver} failed at linearization {iteration}: {out.status} {out.error or ''}".strip()
+        # An answer is applied only when its solver stands by it and it passes the acceptance
+        # checks of every answer (resolve's, with the bounds): a stalled answer within the
+        # acceptance limits has still moved cells of a settled layer (docs/performance.md).
+        refused = "" if out.y is None or not out.found else acceptance_failure(
+            system, "complementarity", out.y, out.lam, settings.tolerance, problem.lower, problem.upper)
+        if not out.found or out.y is None or not np.all(np.isfinite(out.y)) or refused:
+            message = (f"{settings.solver} failed at linearization {iteration}: {out.status} {out.error or ''} "
+                       f"{refused}").strip()
             break
         lam = system.to_contact_impulses(out.lam) if out.lam is not None else np.zeros(len(contacts))
         progress.last = ContactImpulses(key_a, key_b, progress.found.kind.copy(), lam)

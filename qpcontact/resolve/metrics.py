@@ -57,26 +57,44 @@ def multiplier_consistency(system: ContactSystem, y: np.ndarray, lam: np.ndarray
     return float(np.linalg.norm(y - system.matrix.T @ lam)) / norm if norm > 0 else 0.0
 
 
-def kkt_residuals(system: ContactSystem, y: np.ndarray, lam: np.ndarray) -> dict[str, float]:
+def kkt_residuals(system: ContactSystem, y: np.ndarray, lam: np.ndarray, lower: np.ndarray | None = None,
+                  upper: np.ndarray | None = None) -> dict[str, float]:
     """How far ``(ỹ, λ̃)`` is from satisfying the KKT conditions of the complementarity QP
-    ``min ½‖ỹ‖²  s.t. B̃ỹ ≥ b̃`` (model.md): a certificate of optimality that needs no other
-    solver, since the QP is strictly convex and its KKT point is the unique optimum. Scaled units
-    (``max b̃ = 1``); impulses relative to ``max(max |λ̃|, 1)``, ``ỹ`` to ``max(‖ỹ‖, 1)``:
+    ``min ½‖ỹ‖²  s.t. B̃ỹ ≥ b̃`` (model.md), with bounds ``l ≤ ỹ ≤ u`` when given (the
+    position-level step's): a certificate of optimality that needs no other solver, since the QP
+    is strictly convex and its KKT point is the unique optimum. Scaled units (``max b̃ = 1``);
+    impulses relative to ``max(max |λ̃|, 1)``, ``ỹ`` to ``max(‖ỹ‖, 1)``:
 
-    - ``stationarity``: ``‖ỹ − B̃ᵀλ̃‖`` (the impulses are equal and opposite contact impulses);
+    - ``stationarity``: ``‖ỹ − B̃ᵀλ̃ − α + β‖`` (the impulses are equal and opposite contact
+      impulses); the bound multipliers ``α, β ≥ 0`` are those the answer implies, the positive and
+      negative parts of ``ỹ − B̃ᵀλ̃`` on the columns with a lower or upper bound;
     - ``primal``: ``max(0, max(b̃ − B̃ỹ))`` (no contact approaches: the penetration);
     - ``dual``: ``max(0, −min λ̃)`` (no contact pulls);
-    - ``complementarity``: ``max_k |λ̃_k (B̃ỹ − b̃)_k|`` (a contact that pushes is exactly stopped).
+    - ``complementarity``: ``max_k |λ̃_k (B̃ỹ − b̃)_k|`` (a contact that pushes is exactly stopped);
+    - with bounds, ``bounds``: the largest violation of a bound, and ``bound complementarity``:
+      ``max |α (ỹ − l)|, |β (u − ỹ)|`` (a bound that acts is met exactly).
 
-    All four are 0 exactly at the optimum."""
+    All are 0 exactly at the optimum."""
     slack = system.matrix @ y - system.rhs
     scale = max(float(np.abs(lam).max(initial=0.0)), 1.0)
-    return {
-        "stationarity": float(np.linalg.norm(y - system.matrix.T @ lam)) / max(float(np.linalg.norm(y)), 1.0),
+    residual = y - system.matrix.T @ lam
+    out = {
         "primal": max(0.0, -float(slack.min(initial=0.0))),
         "dual": max(0.0, -float(lam.min(initial=0.0))) / scale,
         "complementarity": float(np.max(np.abs(lam * slack), initial=0.0)) / scale,
     }
+    if lower is not None or upper is not None:
+        lo = np.full(y.size, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+        hi = np.full(y.size, np.inf) if upper is None else np.asarray(upper, dtype=float)
+        alpha = np.where(np.isfinite(lo), np.maximum(residual, 0.0), 0.0)
+        beta = np.where(np.isfinite(hi), np.maximum(-residual, 0.0), 0.0)
+        residual = residual - alpha + beta
+        with np.errstate(invalid="ignore"):
+            out["bounds"] = max(0.0, float(np.max(np.maximum(lo - y, y - hi), initial=0.0)))
+            gaps = np.concatenate([np.where(alpha > 0, alpha * (y - lo), 0.0), np.where(beta > 0, beta * (hi - y), 0.0)])
+        out["bound complementarity"] = float(np.max(np.abs(gaps), initial=0.0)) / scale
+    out["stationarity"] = float(np.linalg.norm(residual)) / max(float(np.linalg.norm(y)), 1.0)
+    return out
 
 
 def distance(y: np.ndarray, reference: np.ndarray) -> float:

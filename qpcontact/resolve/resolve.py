@@ -114,7 +114,7 @@ def _check_options(solver: str, formulation: str, form: str, tolerance: float, t
 
 
 def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, lam: np.ndarray | None,
-                       tolerance: float) -> str:
+                       tolerance: float, lower: np.ndarray | None = None, upper: np.ndarray | None = None) -> str:
     """Why a reported solution is not accepted, or ``""`` when it is (docs/model-notes.md,
     "Accepting an answer"). What ``tolerance`` promises: each measure below, in the scaled units
     of :mod:`qpcontact.assembly.system` (``max b̃ = 1``), is at most
@@ -130,12 +130,28 @@ def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, l
       most negative (pulling) contact impulse relative to the largest;
     - least_squares, when ``Mx = b`` is consistent: the overshoot of ``B̃ỹ = b̃``.
 
-    The plain problem's answer may pull by design (negative contact impulses are not checked)."""
+    The plain problem's answer may pull by design (negative contact impulses are not checked).
+
+    With bounds on ``ỹ`` (``lower``, ``upper``: the position-level step's turning and shrinking),
+    a complementarity answer is judged by the KKT conditions with bounds
+    (:func:`~qpcontact.resolve.metrics.kkt_residuals`: stationarity with the bound multipliers
+    the answer implies, bound violation and bound complementarity) in place of the duality gap
+    and the multiplier consistency, which assume no bounds."""
     limit = acceptance_limit(tolerance)
     checks = {"penetrates by": metrics.penetration(system, y)}
-    if formulation == "complementarity":
-        if lam is None:
-            return "the answer has no contact impulses, so its complementarity cannot be checked"
+    bounded = lower is not None or upper is not None
+    if formulation == "complementarity" and lam is None:
+        return "the answer has no contact impulses, so its complementarity cannot be checked"
+    if formulation == "complementarity" and bounded:
+        assert lam is not None
+        kkt = metrics.kkt_residuals(system, y, lam, lower, upper)
+        checks.update({"has complementarity residual": metrics.complementarity_residual(system, y, lam),
+                       "pulls with relative contact impulse": kkt["dual"],
+                       "has stationarity residual (bounds included)": kkt["stationarity"],
+                       "violates a bound by": kkt["bounds"],
+                       "has bound complementarity residual": kkt["bound complementarity"]})
+    elif formulation == "complementarity":
+        assert lam is not None
         checks["has complementarity residual"] = metrics.complementarity_residual(system, y, lam)
         # Feasible but not optimal (e.g. impulses larger than needed) shows up here.
         checks["has relative duality gap"] = metrics.duality_gap(system, y, lam)

@@ -280,6 +280,9 @@ def test_an_update_that_throws_cells_into_each_other_is_backtracked(monkeypatch)
         return dataclasses.replace(out, y=-15.0 * out.y) if len(calls) == 1 else out
 
     monkeypatch.setattr(position, "solve", wild_first)
+    # (The wild answer stands for one that meets its linearization and lands far outside where it
+    # holds; the acceptance checks would refuse this fake one outright.)
+    monkeypatch.setattr(position, "acceptance_failure", lambda *args, **kwargs: "")
     cells = rods([[0, 0, 0], [0, 0.95, 0]], [[1, 0, 0], [1, 0, 0]], 2.0)
     out = position_step(cells, 0.05, drive=np.zeros((2, 7)), planar=True,
                         settings=PositionSettings(relaxation=1.0))
@@ -335,3 +338,19 @@ def test_the_linearization_is_the_exact_derivative_of_the_end_of_step_separation
         scale = np.max(np.abs(numeric))
     assert max(exact) <= 1e-6 * scale
     assert max(naive) >= 1e-2 * scale  # the test can tell the two apart
+
+
+def test_an_answer_that_fails_the_acceptance_checks_is_never_applied(monkeypatch):
+    """The position step's answers pass resolve's acceptance checks (with the bounds): an answer
+    the solver reports as converged but that penetrates is refused, and the step fails unapplied."""
+    import dataclasses
+
+    import qpcontact.colony.position as position
+
+    real = position.solve
+    monkeypatch.setattr(position, "solve", lambda *a, **k: dataclasses.replace(real(*a, **k), y=np.zeros_like(
+        real(*a, **k).y)))
+    cells = rods([[0, 0, 0], [0, 0.9, 0]], [[1, 0, 0], [1, 0, 0]], 2.0)
+    out = position_step(cells, 0.05, planar=True, on_failure="return")
+    assert not out.converged and "penetrates" in out.message
+    assert np.allclose(out.impulses, 0.0)
