@@ -5,7 +5,9 @@ Data flow, one wing each (a wing imports only from itself and the wings before i
 :mod:`~qpcontact.assembly` (:func:`build_system`) → :mod:`~qpcontact.solvers` (one registry:
 the plain linear solve, MPRGP, every qpsolvers backend) → :mod:`~qpcontact.resolve`
 (:func:`resolve`, one call per step, every answer checked → :class:`Result`) →
-:mod:`~qpcontact.colony` (:func:`step`, :func:`grow`, :class:`Colony`, snapshots; the stress and
+:mod:`~qpcontact.colony` (the position-level step :func:`position_step` — what ``qpcontact simulate``
+runs — and :func:`grow_position`; the velocity-level :func:`step` and :func:`grow`; :class:`Colony`,
+snapshots; the stress and
 pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`). The studies
 (:mod:`qpcontact.studies`: scenes, catalogue, comparison, stability, benchmark, demo) sit on
 top and are not imported here. docs/architecture.md describes the layout.
@@ -13,7 +15,11 @@ top and are not imported here. docs/architecture.md describes the layout.
 
 from .assembly import ContactSystem, build_system
 from .colony import (
+    CellMotion,
     Colony,
+    ContactImpulses,
+    PositionSettings,
+    PositionStepResult,
     StepResult,
     cell_forces,
     cell_pressure,
@@ -21,7 +27,10 @@ from .colony import (
     divide,
     expansion_time_step,
     grow,
+    grow_position,
+    growth_time_step,
     load_colony,
+    position_step,
     pressure_growth_rate,
     save_colony,
     step,
@@ -32,6 +41,7 @@ from .errors import (
     QPContactError,
     SolverFailedError,
     SolverNotInstalledError,
+    StepFailedError,
     TooManyContactsError,
     UnknownSolverError,
 )
@@ -42,7 +52,8 @@ from .solvers import FORMS, FORMULATIONS, SolverSpec, available_solvers, get_sol
 __version__ = "0.1.0"
 
 __all__ = [
-    "FORMS", "FORMULATIONS", "Agreement", "Cells", "Colony", "ContactSystem", "Contacts", "InvalidArgumentError",
+    "FORMS", "FORMULATIONS", "Agreement", "CellMotion", "Cells", "Colony", "ContactImpulses", "PositionSettings",
+    "PositionStepResult", "StepFailedError", "grow_position", "growth_time_step", "position_step", "ContactSystem", "Contacts", "InvalidArgumentError",
     "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
     "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
     "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",

@@ -88,10 +88,19 @@ def test_public_api_of_the_readme_and_the_wings():
     assert qc.__version__
 
 
-def test_readme_example_runs():
-    block = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)[0]
+def test_readme_examples_run():
+    """Both of the README's examples: the position-level step in a loop (growth pushes the third
+    cell away; no overlap beyond the tolerance; each cell's pressure from the contact forces), then
+    one contact solve."""
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
     namespace: dict = {}
-    exec(compile(block, "README.md", "exec"), namespace)
+    exec(compile(blocks[0], "README.md", "exec"), namespace)
+    out, cells = namespace["out"], namespace["cells"]
+    assert out.converged and out.max_overlap <= 0.01 and out.contact_forces.max() > 0
+    assert cells.centers[2, 0] > 2.0 + 0.1  # pushed along x by the two growing cells
+    assert np.all(qc.cell_pressure(cells, out.contacts, out.contact_forces) > 0)
+    namespace = {}
+    exec(compile(blocks[1], "README.md", "exec"), namespace)
     result = namespace["result"]
     assert result.converged and len(result.contacts) == 1
     assert np.allclose(result.impulses[0, :3], [0.0, 0.5, 0.0], atol=1e-6)
