@@ -7,16 +7,24 @@ depends only on the pattern is done once (:class:`GramMatrix`): every product ``
 so a refill is one ``np.bincount``; the fill-reducing ordering and CHOLMOD's symbolic analysis
 are computed once; each iteration only refills the values and runs the numeric factorization.
 
-The factorization is CHOLMOD's supernodal Cholesky, bundled with cvxopt (dense BLAS kernels on
-the supernodes: 5× the simplicial LDLᵀ of qdldl on a grown colony of 10⁴ cells,
-docs/performance.md). The ordering is METIS's nested dissection (through pymetis) when pymetis
-is installed, else CHOLMOD's own (AMD): on grown colonies nested dissection makes the factor
-25 % cheaper in 2D and 3D (docs/model-notes.md, "A step that scales"). cvxopt's CHOLMOD is
-built without METIS, hence pymetis.
+Two factorizations (:data:`BACKEND`):
+
+- ``"cholmod"`` (always there): CHOLMOD's supernodal Cholesky, bundled with cvxopt (dense BLAS
+  kernels on the supernodes: 5× the simplicial LDLᵀ of qdldl on a grown colony of 10⁴ cells,
+  docs/performance.md), ordered by METIS's nested dissection (through pymetis) when pymetis is
+  installed, else by CHOLMOD's own AMD: on grown colonies nested dissection makes the factor 25 %
+  cheaper in 2D and 3D (docs/model-notes.md, "A step that scales"). cvxopt's CHOLMOD is built
+  without METIS, hence pymetis; its BLAS is a serial ATLAS, so it uses one core.
+- ``"pardiso"`` (``pip install 'qpcontact[pardiso]'``: pypardiso and Intel's MKL, about 1 GB):
+  MKL's PARDISO, its own nested dissection and a threaded supernodal Cholesky on every core:
+  on grown colonies 2–3× faster than CHOLMOD in 2D and 3–4.5× in 3D on this project's 2 cores
+  (docs/performance.md). Used when installed.
 """
 
 from __future__ import annotations
 
+import importlib
+import os
 from collections.abc import Callable
 from typing import Any
 
@@ -25,11 +33,23 @@ import numpy as np
 import scipy.sparse as sp
 from cvxopt import cholmod
 
-pymetis: Any
-try:  # optional: the fill-reducing ordering falls back to CHOLMOD's AMD
-    import pymetis
-except ImportError:  # pragma: no cover - depends on the installation
-    pymetis = None
+
+def _optional(name: str) -> Any:
+    """The module, or None where it is not installed."""
+    try:
+        return importlib.import_module(name)
+    except ImportError:  # pragma: no cover - depends on the installation
+        return None
+
+
+#: Optional: without it, the ordering is CHOLMOD's AMD.
+pymetis: Any = _optional("pymetis")
+#: Optional (qpcontact[pardiso]): the threaded factorization.
+pypardiso: Any = _optional("pypardiso")
+
+#: The factorization of :class:`GramMatrix` (module docstring): ``"pardiso"`` when pypardiso is
+#: installed, else ``"cholmod"``. Module attribute, read when a matrix is made.
+BACKEND = "pardiso" if pypardiso is not None else "cholmod"
 
 #: Below this many unknowns the ordering is CHOLMOD's (AMD): nested dissection pays only for
 #: large matrices, and METIS is not free (0.1–0.2 s at 10⁴ cells).
@@ -114,9 +134,15 @@ class GramMatrix:
         self._first, self._second = first, second
         self.product = csr.data[first] * csr.data[second]
         self._indptr, self._indices = csr.indptr.copy(), csr.indices.copy()
-        self._rows = pattern.indices.tolist()
-        self._cols = (keys // n).tolist()
-        self._permutation = _nested_dissection(csr)
+        self._lower_pattern = (pattern.indptr, pattern.indices)
+        self.backend = BACKEND
+        if self.backend == "pardiso":
+            # The lower triangle in CSC is the upper triangle in CSR, which PARDISO takes.
+            self._pattern = (pattern.indptr.astype(np.int32), pattern.indices.astype(np.int32))
+        else:
+            self._rows = pattern.indices.tolist()
+            self._cols = (keys // n).tolist()
+            self._permutation = _nested_dissection(csr)
         self._matrix: Any = None
         self._symbolic: Any = None
 
@@ -136,12 +162,20 @@ class GramMatrix:
         data[self.diagonal_position] += d
         return data
 
+    def lower(self, w: np.ndarray, d: np.ndarray) -> sp.csc_matrix:
+        """The lower triangle of ``diag(d) + Aᵀ diag(w) A`` as a sparse matrix (what is factorized)."""
+        indptr, indices = self._lower_pattern
+        return sp.csc_matrix((self.values(w, d), indices, indptr), shape=self.shape)
+
     def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
         """Factorize for these weights; returns a function ``v ↦ (diag(d) + Aᵀ diag(w) A)⁻¹ v``.
 
         Raises:
-            ArithmeticError: the matrix is not numerically positive definite (CHOLMOD's error).
+            ArithmeticError: the matrix is not numerically positive definite (CHOLMOD's error, or
+                PARDISO's).
         """
+        if self.backend == "pardiso":
+            return self._factor_pardiso(self.values(w, d))
         data = cvxopt.matrix(self.values(w, d))
         if self._matrix is None:
             self._matrix = cvxopt.spmatrix(data, self._rows, self._cols, self.shape)
@@ -167,3 +201,31 @@ class GramMatrix:
             return np.asarray(x).ravel()
 
         return solve
+
+    def _factor_pardiso(self, data: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """PARDISO (real symmetric positive definite): the analysis once, then the numeric
+        factorization; returns the solve."""
+        indptr, indices = self._pattern
+        upper = sp.csr_matrix((data, indices, indptr), shape=self.shape)
+        if self._symbolic is None:
+            self._symbolic = pypardiso.PyPardisoSolver(mtype=2)
+            # pypardiso looks for MKL's library by walking sys.prefix on every new solver (0.3 s)
+            # unless it is told where it is: tell it, once found.
+            os.environ.setdefault("PYPARDISO_MKL_RT", self._symbolic.libmkl._name)
+            self._call(11, upper, np.zeros(self.shape[0]))
+        self._call(22, upper, np.zeros(self.shape[0]))
+        return lambda v: self._call(33, upper, np.asarray(v, dtype=float))
+
+    def _call(self, phase: int, upper: sp.csr_matrix, v: np.ndarray) -> np.ndarray:
+        self._symbolic.set_phase(phase)
+        try:
+            return self._symbolic._call_pardiso(upper, v)
+        except pypardiso.pardiso_wrapper.PyPardisoError as exc:  # -4: a zero pivot, not positive definite
+            raise ArithmeticError(f"PARDISO: {exc}") from None
+
+    def __del__(self) -> None:
+        if getattr(self, "backend", None) == "pardiso" and self._symbolic is not None:
+            try:
+                self._symbolic.free_memory(everything=True)
+            except Exception:  # pragma: no cover - at interpreter exit
+                pass

@@ -8,6 +8,17 @@ from qpcontact.solvers import cholesky
 from qpcontact.solvers.cholesky import GramMatrix
 
 
+#: Both factorizations: CHOLMOD always; PARDISO where pypardiso is installed (CI installs it).
+BACKENDS = ["cholmod", pytest.param("pardiso", marks=pytest.mark.skipif(
+    cholesky.pypardiso is None, reason="pypardiso not installed (pip install 'qpcontact[pardiso]')"))]
+
+
+@pytest.fixture(params=BACKENDS)
+def backend(request, monkeypatch):
+    monkeypatch.setattr(cholesky, "BACKEND", request.param)
+    return request.param
+
+
 def random_rows(seed: int, k: int = 400, n: int = 300) -> sp.csr_matrix:
     """Rows with two blocks of three entries each, like contact rows between two cells."""
     rng = np.random.default_rng(seed)
@@ -18,7 +29,7 @@ def random_rows(seed: int, k: int = 400, n: int = 300) -> sp.csr_matrix:
 
 
 @pytest.mark.parametrize("metis_size", [10**9, 0], ids=["amd", "nested-dissection"])
-def test_refill_and_solve_equal_the_sparse_product(monkeypatch, metis_size):
+def test_refill_and_solve_equal_the_sparse_product(monkeypatch, metis_size, backend):
     """The fixed-pattern refill of diag(d) + Aᵀ diag(w) A against scipy's product, for two
     weightings (the second reuses the ordering and the symbolic factorization), with either
     ordering."""
@@ -30,13 +41,13 @@ def test_refill_and_solve_equal_the_sparse_product(monkeypatch, metis_size):
         w, d = rng.uniform(0.1, 2.0, A.shape[0]), rng.uniform(0.1, 2.0, A.shape[1])
         solve = gram.factor(w, d)
         dense = (A.T @ sp.diags(w) @ A).toarray() + np.diag(d)
-        stored = sp.csc_matrix((gram.values(w, d), (gram._rows, gram._cols)), shape=gram.shape).toarray()
+        stored = gram.lower(w, d).toarray()
         assert np.allclose(stored, np.tril(dense))
         v = rng.standard_normal(A.shape[1])
         assert np.allclose(dense @ solve(v), v)
 
 
-def test_refresh_takes_new_values_of_the_same_pattern_only():
+def test_refresh_takes_new_values_of_the_same_pattern_only(backend):
     A = random_rows(3)
     gram = GramMatrix(A)
     B = A.copy()
@@ -49,7 +60,7 @@ def test_refresh_takes_new_values_of_the_same_pattern_only():
     assert not gram.refresh(random_rows(4))
 
 
-def test_a_pattern_with_stored_zeros_is_refilled_right_when_they_get_values():
+def test_a_pattern_with_stored_zeros_is_refilled_right_when_they_get_values(backend):
     """The pattern is the structure of A, stored zeros included: ipm reuses the last problem's
     Gram matrix for a matrix of the same structure, and a stored zero there may hold a value
     now. Before, the pattern came from the values (scipy's product drops exact zeros), the
@@ -63,7 +74,15 @@ def test_a_pattern_with_stored_zeros_is_refilled_right_when_they_get_values():
     assert gram.refresh(A)
     w, d = np.ones(A.shape[0]), np.ones(A.shape[1])
     dense = (A.T @ A).toarray() + np.eye(A.shape[1])
-    stored = sp.csc_matrix((gram.values(w, d), (gram._rows, gram._cols)), shape=gram.shape).toarray()
+    stored = gram.lower(w, d).toarray()
     assert np.allclose(stored, np.tril(dense))
     v = np.arange(A.shape[1], dtype=float)
     assert np.allclose(dense @ gram.factor(w, d)(v), v)
+
+
+def test_a_matrix_that_is_not_positive_definite_is_an_arithmetic_error(backend):
+    """(ipm regularizes more on it.) d = −1 with w = 0 makes −I."""
+    A = random_rows(6, k=40, n=30)
+    gram = GramMatrix(A)
+    with pytest.raises(ArithmeticError):
+        gram.factor(np.zeros(A.shape[0]), -np.ones(A.shape[1]))
