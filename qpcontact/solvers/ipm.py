@@ -49,7 +49,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError
-from .cholesky import GramMatrix
+from .cholesky import GramMatrix, quiet_numpy
 from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
 
 #: Default cap on interior-point iterations.
@@ -234,6 +234,14 @@ def interior_point(
         contacts), ``"breakdown"`` (the factorization failed even regularized) or
         ``"infeasible"`` (a bound interval is empty).
     """
+    with quiet_numpy():  # numpy's BLAS threads out of the factorization's way
+        return _iterate(matrix, rhs, lower, upper, tolerance, max_iterations, time_limit, initial, warm_shift, space)
+
+
+def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upper: np.ndarray | None,
+             tolerance: float, max_iterations: int | None, time_limit: float | None, initial: np.ndarray | None,
+             warm_shift: float, space: str) -> IterativeSolution:
+    """The iterations of :func:`interior_point`."""
     check_options(tolerance, max_iterations, time_limit)
     if space not in ("auto", "unknowns", "contacts"):
         raise InvalidArgumentError(f"space: expected 'auto', 'unknowns' or 'contacts', got {space!r}")
