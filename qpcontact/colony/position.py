@@ -315,6 +315,11 @@ class _Tracked:
         keys, first = np.unique(contact_keys(a, b, kind, span), return_index=True)
         return cls(a[first], b[first], kind[first], keys)
 
+    def keyed(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(a, b)`` with cells as their ids (planes stay ``-1 - j``): the contacts as
+        :class:`ContactImpulses` keys them."""
+        return ids[self.a], np.where(self.b >= 0, ids[np.maximum(self.b, 0)], self.b)
+
     def union(self, other: _Tracked, span: int) -> _Tracked:
         return _Tracked.of(np.concatenate([self.a, other.a]), np.concatenate([self.b, other.b]),
                            np.concatenate([self.kind, other.kind]), span)
@@ -532,6 +537,61 @@ def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known:
     return False
 
 
+def _track(found: _Tracked, now: Cells, predicted: Cells | None, planes: Sequence[Plane], reach: float,
+           span: int) -> _Tracked:
+    """The contacts kept so far and those within ``reach`` of the cells where they are now (and,
+    at the first linearization, where the last step's motion would take them, ``predicted``).
+
+    Every linearization searches the whole margin: a cell pushed out of a jam can move a diameter
+    against a neighbour within one linearization (measured on a grown colony of 10⁴ cells, with
+    half the margin after the first: 0.14 of a diameter of overlap at the seventh linearization,
+    with a pair found only then)."""
+    found = found.union(_detect(now, planes, reach, span), span)
+    return found if predicted is None else found.union(_detect(predicted, planes, reach, span), span)
+
+
+def _solve(progress: _Progress, system: ContactSystem, problem: Problem, spec: SolverSpec, form: str,
+           settings: PositionSettings, ids: np.ndarray, times: dict[str, float]) -> str:
+    """Solve one linearization's QP and take its answer into ``progress``; why not, if it was
+    not taken. An answer is taken only when its solver stands by it and it passes the acceptance
+    checks of every answer (resolve's, with the bounds): a stalled answer within the acceptance
+    limits has still moved cells of a settled layer (docs/performance.md)."""
+    key_a, key_b = progress.found.keyed(ids)
+    initial = system.from_contact_impulses(progress.last.lookup(key_a, key_b, progress.found.kind)) \
+        if spec.warm_start else None
+    t0 = time.perf_counter()
+    out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial)
+    times["solve"] += time.perf_counter() - t0
+    progress.solver_iterations += out.iterations or 0
+    refused = "" if out.y is None or not out.found else acceptance_failure(
+        system, "complementarity", out.y, out.lam, settings.tolerance, problem.lower, problem.upper)
+    if not out.found or out.y is None or not np.all(np.isfinite(out.y)) or refused:
+        return f"{out.status} {out.error or ''} {refused}".strip()
+    lam = system.to_contact_impulses(out.lam) if out.lam is not None else np.zeros(problem.matrix.shape[0])
+    progress.last = ContactImpulses(key_a, key_b, progress.found.kind.copy(), lam)
+    progress.turn_limited = _turn_limited(system, problem, out.y)
+    progress.previous = progress.impulses
+    progress.impulses = progress.impulses + progress.relaxation * (system.to_impulses(out.y) - progress.impulses)
+    return ""
+
+
+def _result(progress: _Progress, cells: Cells, end: Cells, contacts: Contacts, diameter: np.ndarray,
+            converged: bool, iteration: int, excess: float, start_overlap: float, ids: np.ndarray, dt: float,
+            drive: np.ndarray, message: str, times: dict[str, float]) -> PositionStepResult:
+    """The step's result at the positions of the last kept impulses."""
+    if iteration == 0:
+        progress.last = ContactImpulses.empty()  # nothing was solved: no contact pushed in this step
+    key_a, key_b = progress.found.keyed(ids)
+    impulse_of_contact = progress.last.lookup(key_a, key_b, progress.found.kind)
+    return PositionStepResult(
+        cells=end, impulses=progress.impulses, converged=converged, iterations=iteration, contacts=contacts,
+        contact_impulses=impulse_of_contact, overlaps=progress.overlaps, start_overlap=start_overlap,
+        max_overlap=float(np.max(-contacts.separation / diameter, initial=0.0)), excess=excess, times=times,
+        solver_iterations=progress.solver_iterations, message=message,
+        warm=ContactImpulses(key_a, key_b, progress.found.kind.copy(), impulse_of_contact),
+        turn_limited=progress.turn_limited, motion=CellMotion.of(cells, end, ids, dt, drive + progress.impulses))
+
+
 def position_step(
     cells: Cells,
     dt: float,
@@ -547,9 +607,10 @@ def position_step(
     on_failure: str = "raise",
 ) -> PositionStepResult:
     """Advance overdamped cells by ``dt`` with non-penetration at the end of the step (module
-    docstring). The phases of each linearization: move the cells, find and evaluate the contacts
-    (:func:`_detect`, :func:`_evaluate`), judge the iterate (:func:`_judge`: converged,
-    backtracked, damped), build its QP (:func:`_linearize`), solve it.
+    docstring). The phases of each linearization: move the cells (:func:`move`), find and
+    evaluate the contacts (:func:`_track`, :func:`_evaluate`), judge the iterate (:func:`_judge`:
+    backtracked, damped; converged), build its QP (:func:`_linearize`), solve it and take the
+    answer (:func:`_solve`); then the result (:func:`_result`).
 
     Args:
         cells: the state at time ``t`` (its momenta are ignored: overdamped dynamics).
@@ -598,15 +659,10 @@ def position_step(
     for iteration in range(settings.max_iterations + 1):
         now = move(cells, dt, drive + progress.impulses)
         t0 = time.perf_counter()
-        # Every linearization searches the whole margin: a cell pushed out of a jam can move a
-        # diameter against a neighbour within one linearization (measured on a grown colony of
-        # 10⁴ cells, with half the margin after the first: 0.14 of a diameter of overlap at the
-        # seventh linearization, with a pair found only then).
         known = progress.found.keys
-        progress.found = progress.found.union(_detect(now, planes, reach, span), span)
-        if iteration == 0 and motion is not None:
-            predicted = motion.predict(cells.replace(lengths=now.lengths), ids, dt, parents)
-            progress.found = progress.found.union(_detect(predicted, planes, reach, span), span)
+        predicted = None if iteration or motion is None else motion.predict(cells.replace(lengths=now.lengths), ids,
+                                                                           dt, parents)
+        progress.found = _track(progress.found, now, predicted, planes, reach, span)
         contacts = _evaluate(now, progress.found, planes, planar)
         diameter = _diameters(now, contacts)
         times["detect"] += time.perf_counter() - t0
@@ -629,44 +685,14 @@ def position_step(
         if linear is None:  # nothing asks for a push: the free motion is the answer
             progress.impulses, progress.last = np.zeros((n, 7)), ContactImpulses.empty()
             continue
-        system, problem = linear
-        key_a, key_b = ids[progress.found.a], np.where(progress.found.b >= 0, ids[np.maximum(progress.found.b, 0)],
-                                                       progress.found.b)
-        initial = system.from_contact_impulses(progress.last.lookup(key_a, key_b, progress.found.kind)) \
-            if spec.warm_start else None
-        t0 = time.perf_counter()
-        out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial)
-        times["solve"] += time.perf_counter() - t0
-        progress.solver_iterations += out.iterations or 0
-        # An answer is applied only when its solver stands by it and it passes the acceptance
-        # checks of every answer (resolve's, with the bounds): a stalled answer within the
-        # acceptance limits has still moved cells of a settled layer (docs/performance.md).
-        refused = "" if out.y is None or not out.found else acceptance_failure(
-            system, "complementarity", out.y, out.lam, settings.tolerance, problem.lower, problem.upper)
-        if not out.found or out.y is None or not np.all(np.isfinite(out.y)) or refused:
-            message = (f"{settings.solver} failed at linearization {iteration}: {out.status} {out.error or ''} "
-                       f"{refused}").strip()
+        message = _solve(progress, *linear, spec, form, settings, ids, times)
+        if message:
+            message = f"{settings.solver} failed at linearization {iteration}: {message}"
             break
-        lam = system.to_contact_impulses(out.lam) if out.lam is not None else np.zeros(len(contacts))
-        progress.last = ContactImpulses(key_a, key_b, progress.found.kind.copy(), lam)
-        progress.turn_limited = _turn_limited(system, problem, out.y)
-        progress.previous = progress.impulses
-        progress.impulses = progress.impulses + progress.relaxation * (system.to_impulses(out.y) - progress.impulses)
     # The loop always ends on a detection at the positions of the impulses it kept.
-    if iteration == 0:
-        progress.last = ContactImpulses.empty()  # nothing was solved: no contact pushed in this step
-    key_a, key_b = ids[progress.found.a], np.where(progress.found.b >= 0, ids[np.maximum(progress.found.b, 0)],
-                                                   progress.found.b)
-    impulse_of_contact = progress.last.lookup(key_a, key_b, progress.found.kind)
     times["total"] = time.perf_counter() - t_start
-    result = PositionStepResult(
-        cells=now, impulses=progress.impulses, converged=converged, iterations=iteration, contacts=contacts,
-        contact_impulses=impulse_of_contact, overlaps=progress.overlaps, start_overlap=start_overlap,
-        max_overlap=float(np.max(-contacts.separation / diameter, initial=0.0)), excess=excess, times=times,
-        solver_iterations=progress.solver_iterations, message=message,
-        warm=ContactImpulses(key_a, key_b, progress.found.kind.copy(), impulse_of_contact),
-        turn_limited=progress.turn_limited,
-        motion=CellMotion.of(cells, now, ids, dt, drive + progress.impulses))
+    result = _result(progress, cells, now, contacts, diameter, converged, iteration, excess, start_overlap, ids, dt,
+                     drive, message, times)
     if not converged and on_failure == "raise":
         raise StepFailedError(f"position step did not converge: {message}", result)
     return result
