@@ -7,7 +7,6 @@ import scipy.sparse as sp
 from qpcontact.solvers import cholesky
 from qpcontact.solvers.cholesky import GramMatrix
 
-
 #: Both factorizations: CHOLMOD always; PARDISO where pypardiso is installed (CI installs it).
 BACKENDS = ["cholmod", pytest.param("pardiso", marks=pytest.mark.skipif(
     cholesky.pypardiso is None, reason="pypardiso not installed (pip install 'qpcontact[pardiso]')"))]
