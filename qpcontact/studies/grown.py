@@ -30,7 +30,9 @@ import argparse
 import json
 import os
 import resource
+import signal
 import sys
+import threading
 import time
 from datetime import UTC, datetime
 from pathlib import Path
@@ -57,10 +59,13 @@ def _settings(dimensions: int, step: str, n_cells: int, changes: dict[str, Any] 
                               "bench-grown")
 
 
-def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) -> dict[str, Any]:
+def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None,
+              time_limit: float | None = None) -> dict[str, Any]:
     """Grow one colony (``settings``: :meth:`Settings.to_tables`) from one cell to the largest of
     ``sizes`` and time it (run in a child process by :func:`run_growth`). The state at each size
-    is saved in ``save_dir`` (when given) as ``{dimensions}d-{size}.npz``."""
+    is saved in ``save_dir`` (when given) as ``{dimensions}d-{size}.npz``. After ``time_limit``
+    seconds the run is stopped as by SIGTERM (the step under way abandoned) and what it reached
+    is reported, with ``stopped`` set."""
     run_settings = Settings.from_stored(settings, "bench-grown")
     reached: dict[int, dict[str, float]] = {}
     start = time.perf_counter()
@@ -73,7 +78,17 @@ def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) 
                 if save_dir is not None:
                     save_colony(Path(save_dir) / f"{run_settings.run.dimensions}d-{size}.npz", colony, step)
 
-    run = run_colony(run_settings, progress=False, hook=note)
+    # The clean stop of a run (SIGTERM), so that a colony short of its target still reports the
+    # sizes it reached; the parent's hard limit (run_growth) is only for a run that hangs.
+    timer = None if time_limit is None else threading.Timer(time_limit, os.kill, (os.getpid(), signal.SIGTERM))
+    if timer is not None:
+        timer.daemon = True
+        timer.start()
+    try:
+        run = run_colony(run_settings, progress=False, hook=note)
+    finally:
+        if timer is not None:
+            timer.cancel()
     note(run.colony, run.steps)  # the last state, which no hook call sees
     history = run.history
     cells, times = np.asarray(history["cells"], float), np.asarray(history["time"], float)
@@ -83,7 +98,8 @@ def grow_once(settings: dict[str, Any], sizes: list[int], save_dir: str | None) 
         if cells[-1] > cells[half]:
             doubling = float((times[-1] - times[half]) / np.log2(cells[-1] / cells[half]))
     seconds = np.asarray(history["step_seconds"], float)
-    return dict(reached=reached, steps=run.steps, wall=run.wall_seconds, error=run.error,
+    stopped = f"time limit {time_limit:g} s" if run.interrupted == signal.SIGTERM and time_limit is not None else ""
+    return dict(reached=reached, steps=run.steps, wall=run.wall_seconds, error=run.error, stopped=stopped,
                 slope=step_time_slope(cells, seconds, sizes), step_cells=cells.tolist(), step_seconds=seconds.tolist(),
                 max_overlap=float(max(history["max_overlap"], default=0.0)),
                 linearizations=int(np.sum(history["linearizations"])), cells=int(run.colony.cells.n),
@@ -154,7 +170,9 @@ def run_growth(dimensions: int, step: str, sizes: list[int], n_cells: int, save_
                timeout: float, changes: dict[str, Any] | None = None) -> dict[str, Any]:
     """:func:`grow_once` in a child process with a time limit; the failure said, not hidden."""
     settings = _settings(dimensions, step, n_cells, changes).to_tables()
-    status, value = guarded(grow_once, (settings, sizes, None if save_dir is None else str(save_dir)), timeout)
+    # The run stops itself at `timeout`; the hard limit, a little later, catches one that hangs.
+    status, value = guarded(grow_once, (settings, sizes, None if save_dir is None else str(save_dir), timeout),
+                            timeout + max(120.0, 0.05 * timeout))
     record = dict(dimensions=dimensions, step=step, target=n_cells, changes=changes or {})
     if status == "ok":
         return {**record, **value}
@@ -212,7 +230,8 @@ def markdown(growth: list[dict[str, Any]], steps: list[dict[str, Any]], peer: di
         lines.append(f"| {r['dimensions']}D | {r['step']} | " + " | ".join(cells) +
                      f" | {r['steps']} | {r['linearizations']} | {r['max_overlap']:.4f} | {_fmt(ratio, 2)} | "
                      f"{r['peak_bytes'] / 2**30:.2f} GiB | {_fmt(r.get('slope'), 2)} |"
-                     + (f" stopped: {r['error'][:60]}" if r.get("error") else ""))
+                     + (f" stopped: {r['error'][:60]}" if r.get("error") else "")
+                     + (f" stopped at the {r['stopped']}: {r['cells']:,} cells" if r.get("stopped") else ""))
     if peer is not None:
         cells = [_fmt(peer["reached"].get(s, peer["reached"].get(str(s), {})).get("seconds")) for s in sizes]
         worst = max((v.get("max_overlap", 0.0) for v in peer["reached"].values()), default=0.0)
@@ -269,7 +288,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=positive_int, default=3, help="steps timed per configuration in the one-step "
                         "table, median kept (default: 3)")
     parser.add_argument("--time-limit", type=positive_float, default=7200.0, metavar="S",
-                        help="wall-time limit of one growth run [s] (default: 7200)")
+                        help="wall-time limit of one growth run [s]: the run stops there and reports the sizes it "
+                        "reached (default: 7200)")
     parser.add_argument("--peer-log", type=Path, metavar="FILE",
                         help="CellModeller's step log (JSON of run_cellmodeller.py) to put in the table")
     parser.add_argument("--cache-dir", type=Path, metavar="FOLDER",
@@ -294,8 +314,10 @@ def run_command(args: argparse.Namespace) -> int:
                 record = run_growth(dimensions, step, marks, target,
                                     args.cache_dir if step == "position" else None, args.time_limit)
                 print("   " + ("failed: " + record["error"] if "error" in record and "reached" not in record
-                               else f"{record['wall']:.1f} s, {record['steps']} steps, largest overlap "
-                                    f"{record['max_overlap']:.4f}"), flush=True)
+                               else f"{record['wall']:.1f} s, {record['steps']} steps, {record['cells']:,} cells, "
+                                    f"largest overlap {record['max_overlap']:.4f}"
+                                    + (f", stopped at the {record['stopped']}" if record.get("stopped") else "")),
+                      flush=True)
                 growth.append(record)
     steps: list[dict[str, Any]] = []
     kinds = [(f"position, {name}", "position", dict(position_solver=name)) for name in args.position_solvers]

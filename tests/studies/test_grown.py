@@ -36,3 +36,15 @@ def test_peer_times_read_the_cellmodeller_log(tmp_path):
     peer = grown.peer_times(log, [8, 64])
     assert peer["reached"][8]["seconds"] == 0.5 * 10 and peer["reached"][8]["step"] == 10
     assert peer["reached"][64]["max_overlap"] == 0.12
+
+
+def test_a_growth_run_at_its_time_limit_stops_and_reports_what_it_reached(tmp_path):
+    """A colony short of its target at the time limit is stopped cleanly (as by SIGTERM) and the
+    sizes it reached are kept (before, the child was killed and the whole record lost)."""
+    record = grown.run_growth(2, "position", [2, 10**6], 10**6, tmp_path, timeout=3.0)
+    assert "error" not in record or record.get("reached"), record
+    assert record["stopped"] == "time limit 3 s"
+    assert "2" in {str(k) for k in record["reached"]} and 2 <= record["cells"] < 10**6
+    assert (tmp_path / "2d-2.npz").exists()
+    assert "stopped at the time limit 3 s" in grown.markdown([record], [], None, [2, 10**6],
+                                                              dict(date="d", machine="m", command="c"))
