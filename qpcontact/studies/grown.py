@@ -221,6 +221,7 @@ def markdown(growth: list[dict[str, Any]], steps: list[dict[str, Any]], peer: di
              "| dims | step | " + " | ".join(f"{s:,}" for s in sizes) + " | steps | linearizations | largest overlap "
              f"| colony doubling / cells' own | peak memory | slope of step time ({SLOPE_RANGE[0]:,}–{SLOPE_RANGE[1]:,} cells) |",
              "|---|---|" + "---|" * len(sizes) + "---|---|---|---|---|---|"]
+    notes: list[str] = []
     for r in growth:
         if "error" in r and r.get("reached") is None:
             lines.append(f"| {r['dimensions']}D | {r['step']} | failed: {r['error'].splitlines()[0][:80]} |")
@@ -230,13 +231,16 @@ def markdown(growth: list[dict[str, Any]], steps: list[dict[str, Any]], peer: di
         lines.append(f"| {r['dimensions']}D | {r['step']} | " + " | ".join(cells) +
                      f" | {r['steps']} | {r['linearizations']} | {r['max_overlap']:.4f} | {_fmt(ratio, 2)} | "
                      f"{r['peak_bytes'] / 2**30:.2f} GiB | {_fmt(r.get('slope'), 2)} |"
-                     + (f" stopped: {r['error'][:60]}" if r.get("error") else "")
-                     + (f" stopped at the {r['stopped']}: {r['cells']:,} cells" if r.get("stopped") else ""))
+                     + (f" stopped: {r['error'][:60]}" if r.get("error") else ""))
+        if r.get("stopped"):
+            notes.append(f"The {r['dimensions']}D {r['step']} run stopped at the {r['stopped']}: {r['cells']:,} cells.")
     if peer is not None:
         cells = [_fmt(peer["reached"].get(s, peer["reached"].get(str(s), {})).get("seconds")) for s in sizes]
         worst = max((v.get("max_overlap", 0.0) for v in peer["reached"].values()), default=0.0)
         lines.append("| 2D | CellModeller (peer) | " + " | ".join(cells) +
                      f" | {peer['steps']} | – | {worst / 1.0:.4f} µm | – | – |")
+    if notes:
+        lines += [""] + notes
     lines += ["", "**One step of a grown colony** (median seconds of the same step from the state the position run "
               "reached; linearizations and solver iterations of the position step; largest overlap after it; the "
               "largest distance of a centre or tip from where the same step at solver tolerance "

@@ -46,5 +46,5 @@ def test_a_growth_run_at_its_time_limit_stops_and_reports_what_it_reached(tmp_pa
     assert record["stopped"] == "time limit 3 s"
     assert "2" in {str(k) for k in record["reached"]} and 2 <= record["cells"] < 10**6
     assert (tmp_path / "2d-2.npz").exists()
-    assert "stopped at the time limit 3 s" in grown.markdown([record], [], None, [2, 10**6],
+    assert "run stopped at the time limit 3 s" in grown.markdown([record], [], None, [2, 10**6],
                                                               dict(date="d", machine="m", command="c"))
