@@ -354,3 +354,27 @@ def test_an_answer_that_fails_the_acceptance_checks_is_never_applied(monkeypatch
     out = position_step(cells, 0.05, planar=True, on_failure="return")
     assert not out.converged and "penetrates" in out.message
     assert np.allclose(out.impulses, 0.0)
+
+
+@pytest.mark.parametrize("dimensions, n_cells", [(2, 400), (3, 250)])
+def test_end_positions_agree_with_a_tight_step_to_a_thousandth_of_a_diameter(dimensions, n_cells):
+    """Issue 22: accuracy is not bought with speed. On a colony grown by ``simulate``'s defaults,
+    one default step ends within 10⁻³ of a diameter (every cell's centre and tips) of the same
+    step solved at tolerance 10⁻⁸ (``qpcontact bench-grown`` reports the same on the large states)."""
+    from qpcontact.colony import Settings, run_colony
+    from qpcontact.colony.simulate import step_function
+    from qpcontact.studies.grown import REFERENCE_TOLERANCE, end_difference
+
+    settings = Settings().updated({"cells": n_cells, "dimensions": dimensions}, "test")
+    colony = run_colony(settings, progress=False).colony
+    drive = None
+    if dimensions == 3:
+        drive = np.zeros((colony.cells.n, 7))
+        drive[:, 2] = -settings.model.sink_speed * colony.cells.masses
+    default = step_function(settings, {})(colony, settings.time_step_of(colony), drive=drive)
+    tight_settings = settings.updated({"position_tolerance": REFERENCE_TOLERANCE}, "test")
+    tight = step_function(tight_settings, {})(colony, default.dt, drive=drive)
+    assert default.result.converged and tight.result.converged
+    assert tight.result.solver_iterations > default.result.solver_iterations  # a different, tighter solve
+    assert default.result.max_overlap <= settings.position.overlap_tolerance
+    assert end_difference(default.colony, tight.colony) <= 1e-3
