@@ -23,6 +23,7 @@ Physical impulses are ``x = W^{-1/2} ỹ σ_b/σ_B``; contact impulses ``λ = λ
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,6 +130,21 @@ class ContactSystem:
         :meth:`to_contact_impulses`)."""
         return contact_impulses * self.operator_scale**2 / self.velocity_scale
 
+    def velocity_changes(self, impulses: np.ndarray) -> np.ndarray:
+        """(K,) ``(M x)_k = (J W x)_k`` [length/time]: the change of each contact's relative normal
+        velocity that the (N, 7) impulses ``x`` make (their part in the columns: a slot left out
+        moves no contact of the system), one product with ``B̃``."""
+        x = np.einsum("ij,ij->i", impulses[self.column_cell], self.column_basis)
+        return self.matrix @ (x * np.sqrt(self.column_inverse_mass) * self.operator_scale)
+
+    def with_rhs(self, b: np.ndarray) -> ContactSystem:
+        """The same (scaled) system with the right-hand side ``b`` [length/time] and its scale ``σ_b``."""
+        b = np.asarray(b, dtype=float)
+        if b.shape != self.b.shape:
+            raise InvalidArgumentError(f"b: expected shape {self.b.shape}, got {b.shape}")
+        scale = _velocity_scale(b)
+        return dataclasses.replace(self, rhs=b / scale, b=b, velocity_scale=scale)
+
     def from_impulses(self, impulses: np.ndarray) -> np.ndarray:
         """Scaled unknowns ``ỹ`` for (N, 7) impulses (the part that lies in the columns)."""
         x = np.einsum("ij,ij->i", impulses[self.column_cell], self.column_basis)
@@ -177,20 +193,14 @@ def velocity_changes(cells: Cells, contacts: Contacts, impulses: np.ndarray, tur
     """(K,) ``(M x)_k`` [length/time]: the change of each contact's relative normal velocity that
     the (N, 7) impulses ``x`` make, with the rows of :func:`build_system` (the same ``turned``),
     for every slot of every cell but the spin about the own axis (which moves no contact point,
-    and which the position-level motion drops)."""
-    slots = np.array([0, 1, 2, 4, 5, 6])
-    out = np.zeros(len(contacts))
-    for cell, sign, side in ((contacts.cell_a, 1.0, "a"), (contacts.cell_b, -1.0, "b")):
-        on = np.flatnonzero(cell >= 0)
-        if on.size == 0:
-            continue
-        part = contacts if on.size == len(contacts) else contacts.subset(on)
-        c = cell[on]
-        jac = contact_jacobian(part, cells, side, turned)
-        directions = slot_directions(cells, np.repeat(c, slots.size), np.tile(slots, c.size)).reshape(c.size, -1, 7)
-        in_slots = np.einsum("ksj,kj->ks", directions, impulses[c]) * slot_inverse_mass(cells, c)[:, slots]
-        out[on] += sign * np.einsum("ks,ks->k", jac[:, slots], in_slots)
-    return out
+    and which the position-level motion drops): :meth:`ContactSystem.velocity_changes` of the
+    system of these contacts (all slots but the spin)."""
+    return build_system(cells, contacts, np.ones(len(contacts)), planar=False, turned=turned).velocity_changes(impulses)
+
+
+def _velocity_scale(b: np.ndarray) -> float:
+    """``σ_b`` [length/time]: the fastest approach, ``max b`` (``max|b|`` if none approaches)."""
+    return float(np.max(b)) if np.max(b) > 0 else float(np.max(np.abs(b)))
 
 
 def build_system(
@@ -272,7 +282,7 @@ def build_system(
     operator_scale = float(np.sqrt(diag.mean())) if scale else 1.0
     # The approach speeds set the scale: separating contacts kept in the system (b <= 0) must
     # not shrink the colliding ones' right-hand sides towards the solvers' tolerances.
-    velocity_scale = (float(np.max(b)) if np.max(b) > 0 else float(np.max(np.abs(b)))) if scale else 1.0
+    velocity_scale = _velocity_scale(b) if scale else 1.0
     # Columns were numbered in row-major order of column_of (involved is sorted), so np.nonzero
     # lists them in column order.
     col_cell, col_slot = np.nonzero(column_of >= 0)

@@ -46,13 +46,14 @@ with ``on_failure="return"``, returns that result; it is never applied as if it 
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..assembly.system import ContactSystem, Turned, build_system, velocity_changes
+from ..assembly.system import ContactSystem, Turned, build_system
 from ..described import check_fields, documented, setting
 from ..errors import InvalidArgumentError, StepFailedError
 from ..geometry.cells import Cells
@@ -63,6 +64,7 @@ from ..geometry.contacts import (
     concatenate,
     contact_keys,
     evaluate_contacts,
+    relative_normal_velocity,
     select_contacts,
 )
 from ..geometry.motion import left_jacobian, move, rotate, turning_vectors
@@ -325,11 +327,13 @@ class _Tracked:
                            np.concatenate([self.kind, other.kind]), span)
 
 
-def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int) -> _Tracked:
+def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int, pairs: np.ndarray | None = None) -> _Tracked:
     """Every contact within ``reach`` [length] of the cells as they are (the closest points of
     every pair, whatever its ends: across the linearizations the closest point moves along the
-    pair, and only kind 0 follows it; docs/model-notes.md)."""
-    a, b, kind = select_contacts(cells, candidate_pairs(cells, reach), reach, always_closest=True)
+    pair, and only kind 0 follows it; docs/model-notes.md), among the candidate ``pairs`` when
+    given (a superset of the pairs within reach, :func:`_first_pairs`)."""
+    pairs = candidate_pairs(cells, reach) if pairs is None else pairs
+    a, b, kind = select_contacts(cells, pairs, reach, always_closest=True)
     parts = [(a, b, kind)]
     for j, plane in enumerate(planes):
         found = plane_contacts(cells, [plane], reach)
@@ -339,9 +343,11 @@ def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int) -> _
 
 
 def _evaluate(cells: Cells, found: _Tracked, planes: Sequence[Plane], planar: bool) -> Contacts:
-    """The contacts of ``found`` at the cells' present positions, in the order of ``found``."""
+    """The contacts of ``found`` at the cells' present positions, in the order of ``found``
+    (their geometry: the normal velocities are left 0, :func:`_result` gives the last ones theirs)."""
     pairwise = found.b >= 0
-    parts = [evaluate_contacts(cells, found.a[pairwise], found.b[pairwise], found.kind[pairwise], planar=planar)]
+    parts = [evaluate_contacts(cells, found.a[pairwise], found.b[pairwise], found.kind[pairwise], planar=planar,
+                               velocities=False)]
     order = [np.flatnonzero(pairwise)]
     for j, plane in enumerate(planes):
         on = np.flatnonzero(found.b == -1 - j)
@@ -374,9 +380,10 @@ class _Floors:
 
 
 def _start(cells: Cells, planes: Sequence[Plane], planar: bool, span: int,
-           settings: PositionSettings) -> tuple[_Floors, float]:
-    """The floors of the targets and the largest overlap at the start of the step."""
-    found = _detect(cells, planes, 0.0, span)
+           settings: PositionSettings, pairs: np.ndarray) -> tuple[_Floors, float]:
+    """The floors of the targets and the largest overlap at the start of the step (among the
+    candidate ``pairs``, a superset of the touching ones)."""
+    found = _detect(cells, planes, 0.0, span, pairs)
     start = _evaluate(cells, found, planes, planar)
     diameter = _diameters(cells, start)
     overlapping = start.separation < 0
@@ -425,12 +432,19 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
     linearization is exact to first order (turning about the moved axes instead, as this step did
     until 2026-12, made the linearizations converge only linearly: 3–6 per step)."""
     turned = Turned(axes=now.axes, jacobian=left_jacobian(turning_vectors(cells, dt, drive + impulses)))
+    # The rows first (the right-hand side needs their product with the impulses so far), then
     # d_k + dt·(J W (x_new − x))_k ≥ target_k + aim  ⇔  (J W x_new)_k ≥ (target_k + aim − d_k)/dt + (J W x)_k
-    b = (target + settings.aim * diameter - contacts.separation) / dt + velocity_changes(cells, contacts, impulses,
-                                                                                           turned)
-    if not np.any(b > 0):
-        return None
-    system = build_system(cells, contacts, b, planar=planar, turned=turned)
+    b = (target + settings.aim * diameter - contacts.separation) / dt
+    if not np.any(impulses):  # the first linearization: nothing to add
+        if not np.any(b > 0):
+            return None
+        system = build_system(cells, contacts, b, planar=planar, turned=turned)
+    else:
+        system = build_system(cells, contacts, np.ones(len(contacts)), planar=planar, turned=turned)
+        b = b + system.velocity_changes(impulses)
+        if not np.any(b > 0):
+            return None
+        system = system.with_rhs(b)
     lower, upper = _bounds(system, cells, drive, impulses, dt, settings) if settings.bounded else (None, None)
     return system, Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper)
 
@@ -538,16 +552,39 @@ def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known:
 
 
 def _track(found: _Tracked, now: Cells, predicted: Cells | None, planes: Sequence[Plane], reach: float,
-           span: int) -> _Tracked:
+           span: int, pairs: np.ndarray | None = None) -> _Tracked:
     """The contacts kept so far and those within ``reach`` of the cells where they are now (and,
-    at the first linearization, where the last step's motion would take them, ``predicted``).
+    at the first linearization, where the last step's motion would take them, ``predicted``),
+    among the candidate ``pairs`` when given (the first linearization's, :func:`_first_pairs`).
 
     Every linearization searches the whole margin: a cell pushed out of a jam can move a diameter
     against a neighbour within one linearization (measured on a grown colony of 10⁴ cells, with
     half the margin after the first: 0.14 of a diameter of overlap at the seventh linearization,
     with a pair found only then)."""
-    found = found.union(_detect(now, planes, reach, span), span)
-    return found if predicted is None else found.union(_detect(predicted, planes, reach, span), span)
+    found = found.union(_detect(now, planes, reach, span, pairs), span)
+    return found if predicted is None else found.union(_detect(predicted, planes, reach, span, pairs), span)
+
+
+def _tip_displacement(start: Cells, end: Cells) -> np.ndarray:
+    """(N,) the largest displacement of a point of each cell's axis between two configurations
+    [length]: that of one of its tips (a point of the axis moves by an affine mix of the two)."""
+    half_start, half_end = 0.5 * start.lengths[:, None], 0.5 * end.lengths[:, None]
+    moved = end.centers - start.centers
+    plus = moved + half_end * end.axes - half_start * start.axes
+    minus = moved - half_end * end.axes + half_start * start.axes
+    return np.sqrt(np.maximum(np.einsum("ij,ij->i", plus, plus), np.einsum("ij,ij->i", minus, minus)))
+
+
+def _first_pairs(cells: Cells, now: Cells, predicted: Cells | None, reach: float) -> np.ndarray:
+    """One broad phase for the start of the step and its first linearization: the candidate
+    pairs of the cells at the start, each cell's reach widened by how far its axis moves to the
+    first linearization's positions ``now`` (the free motion) and to ``predicted``. The start's
+    overlaps and the first linearization's contacts are then found among them (a broad phase is
+    2/3 of a detection; three were made at 10⁴ cells, 2026-12-04)."""
+    slack = _tip_displacement(cells, now)
+    if predicted is not None:
+        slack = np.maximum(slack, _tip_displacement(cells, predicted))
+    return candidate_pairs(cells, reach, slack)
 
 
 def _solve(progress: _Progress, system: ContactSystem, problem: Problem, spec: SolverSpec, form: str,
@@ -583,6 +620,9 @@ def _result(progress: _Progress, cells: Cells, end: Cells, contacts: Contacts, d
         progress.last = ContactImpulses.empty()  # nothing was solved: no contact pushed in this step
     key_a, key_b = progress.found.keyed(ids)
     impulse_of_contact = progress.last.lookup(key_a, key_b, progress.found.kind)
+    contacts = dataclasses.replace(contacts, normal_velocity=relative_normal_velocity(
+        end, contacts.cell_a, contacts.cell_b, contacts.normal, contacts.offset_a, contacts.offset_b,
+        contacts.stretch_a, contacts.stretch_b))
     return PositionStepResult(
         cells=end, impulses=progress.impulses, converged=converged, iterations=iteration, contacts=contacts,
         contact_impulses=impulse_of_contact, overlaps=progress.overlaps, start_overlap=start_overlap,
@@ -650,7 +690,10 @@ def position_step(
     times = {"detect": 0.0, "assemble": 0.0, "solve": 0.0}
     t_start = t0 = time.perf_counter()
     reach = settings.margin * 2.0 * float(np.median(cells.radii)) if n else 0.0
-    floors, start_overlap = _start(cells, planes, planar, span, settings)
+    free = move(cells, dt, drive)
+    predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
+    first_pairs = _first_pairs(cells, free, predicted, reach)
+    floors, start_overlap = _start(cells, planes, planar, span, settings, first_pairs)
     times["detect"] += time.perf_counter() - t0
     empty = np.zeros(0, dtype=np.intp)
     progress = _Progress(impulses=np.zeros((n, 7)), found=_Tracked(empty, empty, empty, empty.astype(np.int64)),
@@ -660,9 +703,8 @@ def position_step(
         now = move(cells, dt, drive + progress.impulses)
         t0 = time.perf_counter()
         known = progress.found.keys
-        predicted = None if iteration or motion is None else motion.predict(cells.replace(lengths=now.lengths), ids,
-                                                                           dt, parents)
-        progress.found = _track(progress.found, now, predicted, planes, reach, span)
+        progress.found = (_track(progress.found, now, predicted, planes, reach, span, first_pairs) if iteration == 0
+                          else _track(progress.found, now, None, planes, reach, span))
         contacts = _evaluate(now, progress.found, planes, planar)
         diameter = _diameters(now, contacts)
         times["detect"] += time.perf_counter() - t0

@@ -26,7 +26,9 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
+import time
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any
 
 import cvxopt
@@ -45,15 +47,37 @@ def _optional(name: str) -> Any:
 
 #: Optional: without it, the ordering is CHOLMOD's AMD.
 pymetis: Any = _optional("pymetis")
-#: Optional (qpcontact[pardiso]): the threaded factorization, and what keeps numpy's threads out
-#: of its way.
+#: Optional (qpcontact[pardiso]): the threaded factorization.
 pypardiso: Any = _optional("pypardiso")
+#: What keeps numpy's threads out of the factorization's way (:func:`quiet_numpy`).
 threadpoolctl: Any = _optional("threadpoolctl")
 _CONTROLLER: list[Any] = []
 
 #: The factorization of :class:`GramMatrix` (module docstring): ``"pardiso"`` when pypardiso is
 #: installed, else ``"cholmod"``. Module attribute, read when a matrix is made.
 BACKEND = "pardiso" if pypardiso is not None else "cholmod"
+
+@dataclass
+class Timings:
+    """Seconds spent, and calls made, in each part of the factorizations of this process (read
+    and reset by ``benchmarks/profile_step.py``): ``setup`` (pattern, ordering and symbolic
+    analysis of a new :class:`GramMatrix`), ``refill`` (the values for new weights), ``factor``
+    (numeric factorizations), ``solve`` (triangular solves)."""
+
+    seconds: dict[str, float] = field(default_factory=lambda: dict.fromkeys(("setup", "refill", "factor", "solve"), 0.0))
+    calls: dict[str, int] = field(default_factory=lambda: dict.fromkeys(("setup", "refill", "factor", "solve"), 0))
+
+    def add(self, part: str, since: float) -> None:
+        self.seconds[part] += time.perf_counter() - since
+        self.calls[part] += 1
+
+    def reset(self) -> None:
+        for part in self.seconds:
+            self.seconds[part], self.calls[part] = 0.0, 0
+
+
+#: The counters of this process (:class:`Timings`).
+TIMINGS = Timings()
 
 #: Below this many unknowns the ordering is CHOLMOD's (AMD): nested dissection pays only for
 #: large matrices, and METIS is not free (0.1–0.2 s at 10⁴ cells).
@@ -66,11 +90,13 @@ def ordering_name() -> str:
 
 
 def quiet_numpy() -> contextlib.AbstractContextManager[Any]:
-    """While PARDISO factorizes on every core, numpy's own OpenBLAS threads (which spin for a
-    while after each call, e.g. a dot product of the iterate) are limited to one: otherwise they
-    take the cores PARDISO's threads need (one step of a grown 2D colony of 10⁴ cells: 12–13 s
-    against 19–21 s, 2026-12-02). Nothing changes with CHOLMOD, or without threadpoolctl."""
-    if BACKEND != "pardiso" or threadpoolctl is None:
+    """numpy's own OpenBLAS threads limited to one while the interior point runs, on every path:
+    its vector work is memory-bound (dot products and matrix-vector products of the iterate), and
+    OpenBLAS's threads spin for a while after each call, taking the cores that PARDISO's threads
+    need, or, with the serial CHOLMOD, the core of another job on a busy machine (one step of a
+    grown 2D colony of 10⁴ cells with PARDISO: 12–13 s against 19–21 s, 2026-12-02; with
+    CHOLMOD on a loaded machine 1.2 s of an 8.9 s step went to one dot product)."""
+    if threadpoolctl is None:  # pragma: no cover - a dependency; kept optional for odd installs
         return contextlib.nullcontext()
     if not _CONTROLLER:
         _CONTROLLER.append(threadpoolctl.ThreadpoolController())
@@ -106,49 +132,68 @@ def _nested_dissection(matrix: sp.csr_matrix) -> np.ndarray | None:
     return np.lexsort((np.arange(n), rank[group])).astype(np.int64)
 
 
+def _row_pairs(indptr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs ``(i ≥ j)`` of stored entries of each row of a CSR matrix: ``(first, second,
+    row)``, positions in its data. Generated for all rows with the same number of entries at once
+    (a few distinct counts: a loop over counts, not over rows)."""
+    counts = np.diff(indptr)
+    firsts, seconds, rows = [], [], []
+    for m in np.unique(counts[counts > 0]):
+        of = np.flatnonzero(counts == m)
+        i, j = np.tril_indices(int(m))
+        start = indptr[of][:, None]
+        firsts.append((start + i).ravel())
+        seconds.append((start + j).ravel())
+        rows.append(np.repeat(of, i.size))
+    if not firsts:
+        none = np.zeros(0, dtype=np.int64)
+        return none, none.copy(), none.copy()
+    return np.concatenate(firsts), np.concatenate(seconds), np.concatenate(rows)
+
+
 class GramMatrix:
     """``diag(d) + Aᵀ diag(w) A`` (n × n, for a K × n sparse ``A``) with the pattern of ``A``
-    fixed, refilled for each ``w > 0``, ``d > 0`` and factorized (module docstring).
+    fixed, refilled for each ``w ≥ 0``, ``d > 0`` and factorized (module docstring).
 
-    Memory: 36 bytes per product; a 2D colony has about 36 products per contact row, a 3D one
-    about 78."""
+    The refill is one sparse product ``P w``: ``P`` (entries of the lower triangle × rows of
+    ``A``) holds each product ``A_ki A_kj`` at the place of entry ``(i, j)`` and row ``k``, in
+    the order of the entries, so the values come out in one pass with no temporaries (a
+    weighted ``np.bincount`` over the products took 10 ms a refill on a grown 2D colony of 5,000
+    cells, the product 2 ms; 2026-12-04).
+
+    Memory: about 16 bytes per product; a 2D colony has about 36 products per contact row, a 3D
+    one about 78."""
 
     def __init__(self, matrix: sp.spmatrix) -> None:
+        t0 = time.perf_counter()
         csr = sp.csr_matrix(matrix)
         csr.sum_duplicates()
         csr.sort_indices()
         k, n = csr.shape
-        counts = np.diff(csr.indptr)
-        # The pairs (i ≥ j) of each row, generated for all rows with the same number of entries
-        # at once (a few distinct counts: a loop over counts, not over rows).
-        firsts, seconds, rows = [], [], []
-        for m in np.unique(counts[counts > 0]):
-            of = np.flatnonzero(counts == m)
-            i, j = np.tril_indices(int(m))
-            start = csr.indptr[of][:, None]
-            firsts.append((start + i).ravel())
-            seconds.append((start + j).ravel())
-            rows.append(np.repeat(of, i.size))
-        first = np.concatenate(firsts) if firsts else np.zeros(0, dtype=np.int64)
-        second = np.concatenate(seconds) if seconds else np.zeros(0, dtype=np.int64)
-        column_i, column_j = csr.indices[first], csr.indices[second]  # sorted: column_i ≥ column_j
-        self.row = (np.concatenate(rows) if rows else np.zeros(0, dtype=np.int64)).astype(np.int32)
-        # The pattern (with the whole diagonal) in CSC order, lower triangle; each product's place
-        # in it by a binary search of its (column, row) key.
-        # From the structure, not the values: a product of stored zeros is dropped by scipy's
-        # matmul, and a refresh (:meth:`refresh`) may fill them (a planar step's Jacobian has
-        # zeros where the next step's has values).
-        structure = csr.copy()
-        structure.data = np.ones_like(structure.data)
+        first, second, row = _row_pairs(csr.indptr)
+        # The pattern (with the whole diagonal) in CSC order, lower triangle, from the structure,
+        # not the values: a product of stored zeros is dropped by scipy's matmul, and a refresh
+        # (:meth:`refresh`) may fill them (a planar step's Jacobian has zeros where the next
+        # step's has values).
+        structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
         pattern = sp.tril(structure.T @ structure + sp.identity(n, format="csc"), format="csc")
         pattern.sort_indices()
-        keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
-        self.position = np.searchsorted(keys, column_j.astype(np.int64) * n + column_i).astype(np.int64)
+        column_of_entry = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr))
+        keys = column_of_entry * n + pattern.indices
+        # Each product's entry by a binary search of its (column, row) key (columns sorted within
+        # a row of A: the first of a pair is the larger column, the row of the lower triangle).
+        position = np.searchsorted(keys, csr.indices[second].astype(np.int64) * n + csr.indices[first])
         self.diagonal_position = np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
         self.size = keys.size
         self.shape = (n, n)
+        # P: one row per entry, one column per row of A (each row of A adds to an entry at most
+        # once: no duplicates). scipy's conversion from triplets is a counting sort; the place of
+        # each product in it comes back as the data of a matrix built with the products' indices.
+        placed = sp.csr_matrix((np.arange(position.size, dtype=np.float64), (position, row)), shape=(self.size, k))
+        self._order = placed.data.astype(np.int64)
         self._first, self._second = first, second
-        self.product = csr.data[first] * csr.data[second]
+        placed.data = (csr.data[first] * csr.data[second])[self._order]
+        self._scatter = placed
         self._indptr, self._indices = csr.indptr.copy(), csr.indices.copy()
         self._lower_pattern = (pattern.indptr, pattern.indices)
         self.backend = BACKEND
@@ -156,11 +201,12 @@ class GramMatrix:
             # The lower triangle in CSC is the upper triangle in CSR, which PARDISO takes.
             self._pattern = (pattern.indptr.astype(np.int32), pattern.indices.astype(np.int32))
         else:
-            self._rows = pattern.indices.tolist()
-            self._cols = (keys // n).tolist()
+            self._rows = cvxopt.matrix(pattern.indices.astype(np.int64), tc="i")
+            self._cols = cvxopt.matrix(column_of_entry, tc="i")
             self._permutation = _nested_dissection(csr)
         self._matrix: Any = None
         self._symbolic: Any = None
+        TIMINGS.add("setup", t0)
 
     def refresh(self, matrix: sp.spmatrix) -> bool:
         """Take the values of ``matrix`` if it has the pattern this was built for (then the
@@ -169,13 +215,15 @@ class GramMatrix:
         if csr.shape[1] != self.shape[0] or not (np.array_equal(csr.indptr, self._indptr)
                                                  and np.array_equal(csr.indices, self._indices)):
             return False
-        self.product = csr.data[self._first] * csr.data[self._second]
+        self._scatter.data = (csr.data[self._first] * csr.data[self._second])[self._order]
         return True
 
     def values(self, w: np.ndarray, d: np.ndarray) -> np.ndarray:
         """The stored (lower-triangle, CSC-ordered) values for these weights."""
-        data = np.bincount(self.position, weights=self.product * w[self.row], minlength=self.size)
+        t0 = time.perf_counter()
+        data = self._scatter @ w
         data[self.diagonal_position] += d
+        TIMINGS.add("refill", t0)
         return data
 
     def lower(self, w: np.ndarray, d: np.ndarray) -> sp.csc_matrix:
@@ -190,9 +238,11 @@ class GramMatrix:
             ArithmeticError: the matrix is not numerically positive definite (CHOLMOD's error, or
                 PARDISO's).
         """
+        values = self.values(w, d)
         if self.backend == "pardiso":
-            return self._factor_pardiso(self.values(w, d))
-        data = cvxopt.matrix(self.values(w, d))
+            return self._factor_pardiso(values)
+        t0 = time.perf_counter()
+        data = cvxopt.matrix(values)
         if self._matrix is None:
             self._matrix = cvxopt.spmatrix(data, self._rows, self._cols, self.shape)
             saved = dict(cholmod.options)
@@ -206,15 +256,21 @@ class GramMatrix:
             finally:
                 cholmod.options.clear()
                 cholmod.options.update(saved)
+            TIMINGS.add("setup", t0)
+            t0 = time.perf_counter()
         else:
             self._matrix.V = data
         cholmod.numeric(self._matrix, self._symbolic)
+        TIMINGS.add("factor", t0)
         factor = self._symbolic
 
         def solve(v: np.ndarray) -> np.ndarray:
+            t1 = time.perf_counter()
             x = cvxopt.matrix(np.asarray(v, dtype=float))
             cholmod.solve(factor, x)
-            return np.asarray(x).ravel()
+            out = np.asarray(x).ravel()
+            TIMINGS.add("solve", t1)
+            return out
 
         return solve
 
@@ -224,6 +280,7 @@ class GramMatrix:
         indptr, indices = self._pattern
         upper = sp.csr_matrix((data, indices, indptr), shape=self.shape)
         if self._symbolic is None:
+            t0 = time.perf_counter()
             self._symbolic = pypardiso.PyPardisoSolver(mtype=2)
             # Its own parameters: nested dissection (METIS), and conditional numerical
             # reproducibility for the threads MKL uses: without it, the threads' order changes the
@@ -235,8 +292,18 @@ class GramMatrix:
             # unless it is told where it is: tell it, once found.
             os.environ.setdefault("PYPARDISO_MKL_RT", self._symbolic.libmkl._name)
             self._call(11, upper, np.zeros(self.shape[0]))
+            TIMINGS.add("setup", t0)
+        t0 = time.perf_counter()
         self._call(22, upper, np.zeros(self.shape[0]))
-        return lambda v: self._call(33, upper, np.asarray(v, dtype=float))
+        TIMINGS.add("factor", t0)
+
+        def solve(v: np.ndarray) -> np.ndarray:
+            t1 = time.perf_counter()
+            out = self._call(33, upper, np.asarray(v, dtype=float))
+            TIMINGS.add("solve", t1)
+            return out
+
+        return solve
 
     def _call(self, phase: int, upper: sp.csr_matrix, v: np.ndarray) -> np.ndarray:
         self._symbolic.set_phase(phase)

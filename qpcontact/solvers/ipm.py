@@ -58,10 +58,11 @@ MAX_ITERATIONS = 100
 #: linearizations of grown 3·10⁴-cell colonies on a plateau the method leaves after 5–6 more
 #: iterations (docs/performance.md, "Failures found at 10⁵ cells").
 STALL_ITERATIONS = 10
-#: Centrality correctors per iteration (Gondzio): each is one more solve with the same factorization.
-CORRECTORS = 1
-#: Iterative refinement steps of each Newton direction (one more solve each, no factorization).
-REFINEMENTS = 3
+#: Centrality correctors per iteration (Gondzio): each is one more solve with the same
+#: factorization (a solve costs a tenth of a factorization on grown colonies); two save a
+#: linearization of a grown colony about one iteration in fifteen against one (docs/model-notes.md,
+#: "A lean step").
+CORRECTORS = 2
 #: The smallest contact compliance ``ρ`` of the Newton systems (``s + ρλ`` for ``s``), in the
 #: scaled units: it bounds the weights ``λ/s`` of the normal matrix in the unknowns by ``1/ρ``.
 REGULARIZATION = 1e-10
@@ -73,130 +74,167 @@ CONTACTS_REGULARIZATION = 1e-4
 UNKNOWNS_ACCURACY = 1e-4
 #: Fraction of the way to the boundary an iterate may go (keeps it interior).
 STEP_FRACTION = 0.995
+#: The compliance ``δ`` of the starting impulses, ``(B̃B̃ᵀ + δI)λ = b̃``: the impulses of a jammed
+#: colony are hundreds of times the scale of one collision, and a small ``δ`` starts them nearer
+#: that scale (δ = 1: 20 iterations on grown 2D colonies; 0.1, with the bounds' multipliers
+#: started consistently: 15; docs/model-notes.md, "A lean step").
+START_COMPLIANCE = 0.1
 
 
-def _max_step(value: np.ndarray, change: np.ndarray) -> float:
-    """Largest ``t ≤ 1`` with ``value + t·change ≥ 0`` (``value > 0``)."""
-    shrinking = change < 0
-    if not shrinking.any():
-        return 1.0
-    return min(1.0, float(np.min(-value[shrinking] / change[shrinking])))
+@dataclass(frozen=True)
+class _Rows:
+    """The constraints ``Gỹ ≥ c`` as one list of rows: the ``K`` contact rows ``B̃ỹ ≥ b̃``, then
+    one row ``ỹ_j ≥ l_j`` per column with a lower bound and one row ``−ỹ_j ≥ −u_j`` per column
+    with an upper bound. Each row has a slack ``z ≥ 0`` and a multiplier ``v ≥ 0`` (the contact
+    impulses ``λ̃``, then the bound multipliers), so the method treats contacts and bounds alike."""
+
+    B: sp.csr_matrix
+    Bt: sp.csr_matrix
+    lower: np.ndarray  # (L,) columns with a lower bound
+    upper: np.ndarray  # (U,) columns with an upper bound
+    c: np.ndarray  # (K + L + U,) right-hand sides
+
+    @property
+    def k(self) -> int:
+        return self.B.shape[0]
+
+    @property
+    def n(self) -> int:
+        return self.B.shape[1]
+
+    def apply(self, y: np.ndarray) -> np.ndarray:
+        """``Gỹ`` (K + L + U,)."""
+        return np.concatenate([self.B @ y, y[self.lower], -y[self.upper]])
+
+    def transpose(self, v: np.ndarray) -> np.ndarray:
+        """``Gᵀv`` (n,)."""
+        out = self.Bt @ v[:self.k]
+        self.add_bounds(out, v)
+        return out
+
+    def add_bounds(self, out: np.ndarray, v: np.ndarray) -> None:
+        """``out += Sᵀv_S``, the bound rows' part of ``Gᵀv`` (each column at most once per kind)."""
+        k, lo = self.k, self.lower.size
+        out[self.lower] += v[k:k + lo]
+        out[self.upper] -= v[k + lo:]
 
 
 @dataclass
 class _Iterate:
-    """A primal-dual point: unknowns ``y``, contact slacks ``s`` and impulses ``lam``, bound
-    slacks ``p = y − l``, ``q = u − y`` and multipliers ``alpha``, ``beta`` (1 and unused where a
-    column has no bound)."""
+    """A primal-dual point: unknowns ``y``, slacks ``z`` and multipliers ``v`` of the rows of
+    :class:`_Rows` (``v[:K]`` the contact impulses)."""
 
     y: np.ndarray
-    s: np.ndarray
-    lam: np.ndarray
-    p: np.ndarray
-    q: np.ndarray
-    alpha: np.ndarray
-    beta: np.ndarray
+    z: np.ndarray
+    v: np.ndarray
 
     def moved(self, step: _Iterate, primal: float, dual: float) -> _Iterate:
-        return _Iterate(self.y + primal * step.y, self.s + primal * step.s, self.lam + dual * step.lam,
-                        self.p + primal * step.p, self.q + primal * step.q, self.alpha + dual * step.alpha,
-                        self.beta + dual * step.beta)
+        return _Iterate(self.y + primal * step.y, self.z + primal * step.z, self.v + dual * step.v)
+
+
+def _max_step(value: np.ndarray, change: np.ndarray) -> float:
+    """Largest ``t ≤ 1`` with ``value + t·change ≥ 0`` (``value > 0``): one pass, one temporary."""
+    if value.size == 0:
+        return 1.0
+    worst = float(np.min(change / value))
+    return 1.0 if worst >= -1.0 else -1.0 / worst
+
+
+def _lengths(x: _Iterate, d: _Iterate) -> tuple[float, float]:
+    """Largest primal and dual step lengths (≤ 1) that keep slacks and multipliers ≥ 0."""
+    return _max_step(x.z, d.z), _max_step(x.v, d.v)
+
+
+def _complementarity(x: _Iterate, d: _Iterate | None = None, primal: float = 0.0, dual: float = 0.0) -> float:
+    """Mean complementarity product ``vᵀz/m`` of the iterate moved by ``d`` (if given), from four
+    dot products: no moved iterate is built for a scalar."""
+    total = float(x.v @ x.z)
+    if d is not None:
+        total += primal * float(x.v @ d.z) + dual * float(d.v @ x.z) + primal * dual * float(d.v @ d.z)
+    return total / max(x.v.size, 1)
 
 
 class _Newton:
-    """The Newton system of one iteration, factorized once, solved for several targets: the
-    residuals, the step lengths and the complementarity, whatever the space of the linear
-    system (:class:`_InUnknowns`, :class:`_InContacts`)."""
+    """The Newton system of one iteration, factorized once, solved for several complementarity
+    targets ``t`` (``v∘Δz + z∘Δv = t``; the primal and dual residuals are driven to zero too),
+    whatever the space of the linear system (:class:`_InUnknowns`, :class:`_InContacts`)."""
 
-    def __init__(self, B: sp.csr_matrix, Bt: sp.csr_matrix, b: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                 has_lo: np.ndarray, has_hi: np.ndarray, x: _Iterate, regularization: float) -> None:
-        self.B, self.Bt, self.x, self.regularization = B, Bt, x, regularization
-        self.has_lo, self.has_hi = has_lo, has_hi
-        self.r_dual = x.y - Bt @ x.lam - x.alpha + x.beta
-        self.r_primal = B @ x.y - b - x.s
-        self.r_lower = np.where(has_lo, x.y - lo - x.p, 0.0)
-        self.r_upper = np.where(has_hi, hi - x.y - x.q, 0.0)
+    def __init__(self, rows: _Rows, x: _Iterate, r_primal: np.ndarray, r_dual: np.ndarray,
+                 regularization: float) -> None:
+        self.rows, self.x, self.regularization = rows, x, regularization
+        self.r_primal, self.r_dual = r_primal, r_dual  # Gy − c − z, y − Gᵀv
         self.solve: Callable[[np.ndarray], np.ndarray] = lambda v: v
 
     def factor(self, matrix: GramMatrix) -> None:
         """Factorize this iteration's system (raises ArithmeticError, CHOLMOD's)."""
         raise NotImplementedError
 
-    def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
-        """Newton direction for complementarity targets ``λs → target_c``, ``αp → target_l``,
-        ``βq → target_u`` (the primal, dual and bound residuals are driven to zero too)."""
+    def direction(self, target: np.ndarray) -> _Iterate:
+        """The Newton direction for complementarity target ``target`` (m,)."""
         raise NotImplementedError
-
-    def lengths(self, d: _Iterate) -> tuple[float, float]:
-        """Largest primal and dual step lengths (≤ 1) that keep slacks and multipliers ≥ 0."""
-        x, lo, hi = self.x, self.has_lo, self.has_hi
-        primal = min(_max_step(x.s, d.s), _max_step(x.p[lo], d.p[lo]), _max_step(x.q[hi], d.q[hi]))
-        dual = min(_max_step(x.lam, d.lam), _max_step(x.alpha[lo], d.alpha[lo]), _max_step(x.beta[hi], d.beta[hi]))
-        return primal, dual
-
-    def complementarity(self, d: _Iterate | None = None, primal: float = 0.0, dual: float = 0.0) -> float:
-        """Mean complementarity product of the iterate (moved by ``d`` if given)."""
-        x = self.x if d is None else self.x.moved(d, primal, dual)
-        lo, hi = self.has_lo, self.has_hi
-        total = x.lam @ x.s + x.alpha[lo] @ x.p[lo] + x.beta[hi] @ x.q[hi]
-        return float(total) / max(x.lam.size + int(lo.sum()) + int(hi.sum()), 1)
 
 
 class _InUnknowns(_Newton):
     """The Newton system as normal equations in the unknowns (module docstring): eliminated
-    ``Δs = B̃Δỹ + r_p``, ``Δλ = (target_c − λΔs)/s``, ``Δα = (t_l − αΔỹ)/p``,
-    ``Δβ = (t_u + βΔỹ)/q``; what is left is the dual equation. ``s``, ``p`` and ``q`` are
-    regularized (``s + ρλ``: a tiny contact compliance) alike in the matrix and in the
-    elimination, so the dual equation holds up to the rounding of ``Δλ``, which is recovered
-    from Δỹ through the weight λ/s. That weight grows without bound as the method converges, so
-    below :data:`UNKNOWNS_ACCURACY` the method continues in :class:`_InContacts`."""
+    ``Δz = GΔỹ + r_p`` and ``Δv = (t − v∘Δz)/z̃``; what is left is the dual equation
+    ``(I + Gᵀ diag(v/z̃) G) Δỹ = −r_d + Gᵀ((t − v∘r_p)/z̃)``. The slacks are regularized
+    (``z̃ = z + ρv``: a tiny compliance) alike in the matrix and in the elimination, so the dual
+    equation holds up to the rounding of ``Δv``, which is recovered from Δỹ through the weight
+    v/z̃. That weight grows without bound as the method converges, so below
+    :data:`UNKNOWNS_ACCURACY` the method continues in :class:`_InContacts`."""
 
     def factor(self, matrix: GramMatrix) -> None:
-        x, rho = self.x, self.regularization
-        self.slack, self.p, self.q = x.s + rho * x.lam, x.p + rho * x.alpha, x.q + rho * x.beta
-        diagonal = 1.0 + np.where(self.has_lo, x.alpha / self.p, 0.0) + np.where(self.has_hi, x.beta / self.q, 0.0)
-        self.solve = matrix.factor(x.lam / self.slack, diagonal)
+        x, rows = self.x, self.rows
+        self.slack = x.z + self.regularization * x.v
+        weight = x.v / self.slack
+        self.solve = matrix.factor(weight[:rows.k], _bound_diagonal(rows, weight))
 
-    def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
-        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
-        t_l = target_l - x.alpha * self.r_lower
-        t_u = target_u - x.beta * self.r_upper
-        h = -self.r_dual + np.where(has_lo, t_l / self.p, 0.0) - np.where(has_hi, t_u / self.q, 0.0)
-        d_y = self.solve(h + self.Bt @ ((target_c - x.lam * self.r_primal) / self.slack))
-        d_s = self.B @ d_y + self.r_primal
-        return _Iterate(
-            y=d_y, s=d_s, lam=(target_c - x.lam * d_s) / self.slack,
-            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
-            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / self.p, 0.0),
-            beta=np.where(has_hi, (t_u + x.beta * d_y) / self.q, 0.0))
+    def direction(self, target: np.ndarray) -> _Iterate:
+        x, rows = self.x, self.rows
+        d_y = self.solve(rows.transpose((target - x.v * self.r_primal) / self.slack) - self.r_dual)
+        d_z = rows.apply(d_y)
+        d_z += self.r_primal
+        return _Iterate(y=d_y, z=d_z, v=(target - x.v * d_z) / self.slack)
 
 
 class _InContacts(_Newton):
     """The Newton system as normal equations in the contact impulses,
-    ``(B̃ diag(w) B̃ᵀ + diag(s/λ + ρ)) Δλ = r`` with ``w = 1/(1 + α/p + β/q)``: Δỹ is recovered
-    from Δλ through ``w ≤ 1``, so rounding stays small however far the method converges; the
-    matrix is larger than in the unknowns (a contact for each row and column) and costlier to
-    factorize (3× on a grown 3D biofilm), so only the last iterations of a tight solve use it."""
+    ``(B̃ diag(ω) B̃ᵀ + diag(z/λ + ρ)) Δλ = r`` with ``ω = 1/(1 + Sᵀ diag(v/z) S)`` the bound rows
+    ``S`` eliminated: Δỹ is recovered from Δλ through ``ω ≤ 1``, so rounding stays small however
+    far the method converges; the matrix is larger than in the unknowns (a contact for each row
+    and column) and costlier to factorize (3× on a grown 3D biofilm), so only the last iterations
+    of a tight solve use it."""
 
     def factor(self, matrix: GramMatrix) -> None:
-        x = self.x
-        self.w = 1.0 / (1.0 + np.where(self.has_lo, x.alpha / x.p, 0.0) + np.where(self.has_hi, x.beta / x.q, 0.0))
+        x, k = self.x, self.rows.k
+        self.omega = 1.0 / _bound_diagonal(self.rows, x.v / x.z)
         # Its own regularization is far smaller: rounding is no issue here (a pivot lost to it
         # raises, and the loop regularizes more).
-        self.solve = matrix.factor(self.w, x.s / x.lam + self.regularization * CONTACTS_REGULARIZATION)
+        self.solve = matrix.factor(self.omega, x.z[:k] / x.v[:k] + self.regularization * CONTACTS_REGULARIZATION)
 
-    def direction(self, target_c: np.ndarray, target_l: np.ndarray, target_u: np.ndarray) -> _Iterate:
-        x, has_lo, has_hi = self.x, self.has_lo, self.has_hi
-        t_l = target_l - x.alpha * self.r_lower
-        t_u = target_u - x.beta * self.r_upper
-        h = -self.r_dual + np.where(has_lo, t_l / x.p, 0.0) - np.where(has_hi, t_u / x.q, 0.0)
-        d_lam = self.solve(-self.r_primal + target_c / x.lam - self.B @ (self.w * h))
-        d_y = self.w * (h + self.Bt @ d_lam)
-        return _Iterate(
-            y=d_y, s=(target_c - x.s * d_lam) / x.lam, lam=d_lam,
-            p=np.where(has_lo, d_y + self.r_lower, 0.0), q=np.where(has_hi, -d_y + self.r_upper, 0.0),
-            alpha=np.where(has_lo, (t_l - x.alpha * d_y) / x.p, 0.0),
-            beta=np.where(has_hi, (t_u + x.beta * d_y) / x.q, 0.0))
+    def direction(self, target: np.ndarray) -> _Iterate:
+        x, rows, k = self.x, self.rows, self.rows.k
+        # The bound rows' part of Gᵀ((t − v∘r_p)/z), with the dual residual.
+        eliminated = (target - x.v * self.r_primal) / x.z
+        h = -self.r_dual
+        rows.add_bounds(h, eliminated)
+        d_lam = self.solve(-self.r_primal[:k] + target[:k] / x.v[:k] - rows.B @ (self.omega * h))
+        d_y = self.omega * (h + rows.Bt @ d_lam)
+        d_z = rows.apply(d_y)
+        d_z += self.r_primal
+        d_z[:k] = (target[:k] - x.z[:k] * d_lam) / x.v[:k]
+        d_v = (target - x.v * d_z) / x.z
+        d_v[:k] = d_lam
+        return _Iterate(y=d_y, z=d_z, v=d_v)
+
+
+def _bound_diagonal(rows: _Rows, weight: np.ndarray) -> np.ndarray:
+    """``1 + diag(Sᵀ diag(weight) S)`` (n,): the identity plus the bound rows' weights."""
+    diagonal = np.ones(rows.n)
+    k, lo = rows.k, rows.lower.size
+    diagonal[rows.lower] += weight[k:k + lo]
+    diagonal[rows.upper] += weight[k + lo:]
+    return diagonal
 
 
 def interior_point(
@@ -238,63 +276,78 @@ def interior_point(
         return _iterate(matrix, rhs, lower, upper, tolerance, max_iterations, time_limit, initial, warm_shift, space)
 
 
+def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | None, lo: np.ndarray,
+           hi: np.ndarray, initial: np.ndarray | None, warm_shift: float) -> _Iterate:
+    """The starting point (Mehrotra's heuristic, over contacts and bounds alike).
+
+    The impulses of ``(B̃B̃ᵀ + δI)λ = b̃`` (:data:`START_COMPLIANCE`), ``ỹ = B̃ᵀλ`` moved inside the
+    bounds (a hundredth of the interval), each bound's multiplier what that move took (so the dual
+    equation holds), then all slacks and all multipliers shifted to be positive and balanced.
+    Infeasible starts are fine: the residuals enter the Newton equations."""
+    B, Bt, b, k, n = rows.B, rows.Bt, rows.c[:rows.k], rows.k, rows.n
+    has_lo, has_hi = np.isfinite(lo), np.isfinite(hi)
+    margin = np.where(has_lo & has_hi, 0.01 * (hi - lo), 0.01)
+    inside = (np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
+    if initial is not None:
+        lam = np.maximum(np.asarray(initial, dtype=float), 0.0)
+        y = np.clip(Bt @ lam, *inside)
+        scale = max(1.0, float(lam.max(initial=0.0)))
+        z = np.maximum(rows.apply(y) - rows.c, np.concatenate([np.full(k, warm_shift), margin[rows.lower],
+                                                                margin[rows.upper]]))
+        v = np.concatenate([np.maximum(lam, warm_shift * scale), np.ones(rows.lower.size + rows.upper.size)])
+        return _Iterate(y, z, v)
+    delta = START_COMPLIANCE
+    # (B̃B̃ᵀ + δI)⁻¹b̃ = (b̃ − B̃(δI + B̃ᵀB̃)⁻¹B̃ᵀb̃)/δ (Woodbury), with the factorization of the unknowns
+    if normal is not None:
+        lam = (b - B @ normal.factor(np.ones(k), np.full(n, delta))(Bt @ b)) / delta
+    else:
+        assert contact_matrix is not None
+        lam = contact_matrix.factor(np.ones(n), np.full(k, delta))(b)
+    free = Bt @ lam
+    y = np.clip(free, *inside)
+    z = rows.apply(y) - rows.c
+    v = np.concatenate([lam, np.maximum(y - free, 0.0)[rows.lower], np.maximum(free - y, 0.0)[rows.upper]])
+    z += max(-1.5 * float(z.min(initial=0.0)), 0.0)
+    v += max(-1.5 * float(v.min(initial=0.0)), 0.0)
+    product = float(z @ v)
+    z_sum, v_sum = float(z.sum()), float(v.sum())
+    z += 0.5 * product / max(v_sum, 1e-300) + 1e-3
+    v += 0.5 * product / max(z_sum, 1e-300) + 1e-3
+    return _Iterate(y, z, v)
+
+
 def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upper: np.ndarray | None,
              tolerance: float, max_iterations: int | None, time_limit: float | None, initial: np.ndarray | None,
              warm_shift: float, space: str) -> IterativeSolution:
-    """The iterations of :func:`interior_point`."""
+    """The iterations of :func:`interior_point`: each one error, one factorization, a predictor,
+    a corrector and up to :data:`CORRECTORS` centrality correctors."""
     check_options(tolerance, max_iterations, time_limit)
     if space not in ("auto", "unknowns", "contacts"):
         raise InvalidArgumentError(f"space: expected 'auto', 'unknowns' or 'contacts', got {space!r}")
     start = time.perf_counter()
     B = sp.csr_matrix(matrix)
-    Bt = B.T.tocsr()
     b = np.asarray(rhs, dtype=float)
     k, n = B.shape
     lo = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
     hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
     if lo.shape != (n,) or hi.shape != (n,):
         raise InvalidArgumentError(f"bounds: expected shape ({n},), got lower {lo.shape}, upper {hi.shape}")
-    has_lo, has_hi = np.isfinite(lo), np.isfinite(hi)
     if np.any(lo > hi):
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
+    lower_columns, upper_columns = np.flatnonzero(np.isfinite(lo)), np.flatnonzero(np.isfinite(hi))
+    rows = _Rows(B, B.T.tocsr(), lower_columns, upper_columns,
+                 np.concatenate([b, lo[lower_columns], -hi[upper_columns]]))
     cap = max_iterations or MAX_ITERATIONS
     # The normal matrices in the unknowns and in the contacts, made when first needed.
     normal: GramMatrix | None = None if space == "contacts" else _gram_matrix(B)
-    contact_matrix: GramMatrix | None = GramMatrix(Bt) if space == "contacts" else None
-
-    # Start (Mehrotra's heuristic): the least-squares impulses of (B̃B̃ᵀ + I)λ = b̃, ỹ = B̃ᵀλ moved
-    # inside the bounds (a hundredth of the interval), then impulses and slacks shifted to be
-    # positive and balanced. It saves about a sixth of the iterations on grown colonies against
-    # unit impulses (docs/performance.md). Infeasible starts are fine: the residuals enter the
-    # Newton equations. Bound slacks start at the distance to the bound.
-    margin = np.where(has_lo & has_hi, 0.01 * (hi - lo), 0.01)
-    if initial is None:
-        # (B̃B̃ᵀ + I)⁻¹b̃ = b̃ − B̃(I + B̃ᵀB̃)⁻¹B̃ᵀb̃ (Woodbury), with the factorization of the unknowns
-        if normal is not None:
-            lam0 = b - B @ normal.factor(np.ones(k), np.ones(n))(Bt @ b)
-        else:
-            assert contact_matrix is not None
-            lam0 = contact_matrix.factor(np.ones(n), np.ones(k))(b)
-        y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
-        s0 = B @ y - b
-        lam0 = lam0 + max(-1.5 * float(lam0.min(initial=0.0)), 0.0)
-        s0 = s0 + max(-1.5 * float(s0.min(initial=0.0)), 0.0)
-        product = float(lam0 @ s0)
-        lam0 = lam0 + 0.5 * product / max(float(s0.sum()), 1e-300) + 1e-3
-        s0 = s0 + 0.5 * product / max(float(lam0.sum()), 1e-300) + 1e-3
-    else:
-        lam0 = np.maximum(np.asarray(initial, dtype=float), 0.0)
-        y = np.clip(Bt @ lam0, np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
-        scale = max(1.0, float(lam0.max(initial=0.0)))
-        lam0 = np.maximum(lam0, warm_shift * scale)
-        s0 = np.maximum(B @ y - b, warm_shift)
-    x = _Iterate(y=y, s=s0, lam=lam0,
-                 p=np.where(has_lo, np.maximum(y - lo, margin), 1.0), q=np.where(has_hi, np.maximum(hi - y, margin), 1.0),
-                 alpha=has_lo.astype(float), beta=has_hi.astype(float))
+    contact_matrix: GramMatrix | None = GramMatrix(rows.Bt) if space == "contacts" else None
+    x = _start(rows, normal, contact_matrix, lo, hi, initial, warm_shift)
     best_error, best, best_iteration = np.inf, x, 0
     status, iteration, regularization = "max_iterations", 0, REGULARIZATION
     for iteration in range(cap + 1):
-        error = _error(x, B @ x.y - b, lo, hi, has_lo, has_hi, x.y - Bt @ x.lam - x.alpha + x.beta)
+        gap = rows.apply(x.y) - rows.c
+        r_dual = x.y - rows.transpose(x.v)
+        error = _error(x, gap, r_dual, k)
         if error < best_error:
             best_error, best, best_iteration = error, x, iteration
         if error <= tolerance:
@@ -309,69 +362,70 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
             status = "time_limit"
             break
         # Normal equations in the unknowns (the smaller and cheaper system) until the last
-        # iterations of a tight solve, which need the stability of the contacts' (_InUnknowns).
+        # iterations of a tight solve, which need the stability of the contacts' (_InContacts).
         in_contacts = space == "contacts" or (space == "auto" and error <= UNKNOWNS_ACCURACY
                                               and tolerance < UNKNOWNS_ACCURACY)
-        newton: _Newton = (_InContacts if in_contacts else _InUnknowns)(B, Bt, b, lo, hi, has_lo, has_hi, x,
-                                                                          regularization)
+        gap -= x.z  # now the primal residual Gy − c − z
+        newton: _Newton = (_InContacts if in_contacts else _InUnknowns)(rows, x, gap, r_dual, regularization)
         if in_contacts and contact_matrix is None:
-            contact_matrix = GramMatrix(Bt)
-        matrix = contact_matrix if in_contacts else normal
-        assert matrix is not None
+            contact_matrix = GramMatrix(rows.Bt)
+        system = contact_matrix if in_contacts else normal
+        assert system is not None
         while True:
             try:
-                newton.factor(matrix)
+                newton.factor(system)
                 break
             except ArithmeticError:  # a pivot lost to rounding: regularize more
                 regularization *= 100.0
                 if regularization > 1e-4:
-                    return _result(best, best_error, iteration, "breakdown", start)
+                    return _result(best, best_error, iteration, "breakdown", k, start)
                 newton.regularization = regularization
-        mu = newton.complementarity()
-        affine = newton.direction(-x.lam * x.s, -x.alpha * x.p, -x.beta * x.q)
-        sigma = min(1.0, (newton.complementarity(affine, *newton.lengths(affine)) / mu) ** 3) if mu > 0 else 0.0
-        targets = (sigma * mu - x.lam * x.s - affine.lam * affine.s,
-                   sigma * mu - x.alpha * x.p - affine.alpha * affine.p,
-                   sigma * mu - x.beta * x.q - affine.beta * affine.q)
-        step = newton.direction(*targets)
-        primal, dual = newton.lengths(step)
-        for _ in range(CORRECTORS):
-            # Gondzio's centrality corrector: aim at a longer step, pull the complementarity
-            # products of that trial point back into [0.1, 10]·σμ, and keep the correction when
-            # the step gets longer (one more solve with the same factorization).
-            trial = x.moved(step, min(1.0, 1.5 * primal + 0.1), min(1.0, 1.5 * dual + 0.1))
-            box = (0.1 * sigma * mu, 10.0 * sigma * mu)
-            products = (trial.lam * trial.s, trial.alpha * trial.p, trial.beta * trial.q)
-            shifts = [np.clip(v, *box) - v for v in products]
-            shifts = [np.maximum(v, -box[1]) for v in shifts]
-            better = newton.direction(*(t + d for t, d in zip(targets, shifts, strict=True)))
-            p2, d2 = newton.lengths(better)
-            if min(p2, d2) < 1.01 * min(primal, dual):
-                break
-            step, primal, dual = better, p2, d2
-            targets = tuple(t + d for t, d in zip(targets, shifts, strict=True))
-        x = x.moved(step, STEP_FRACTION * primal, STEP_FRACTION * dual)
-    return _result(best, best_error, iteration, status, start)
+        x = _step(x, newton)
+    return _result(best, best_error, iteration, status, k, start)
 
 
-def _error(x: _Iterate, slack: np.ndarray, lo: np.ndarray, hi: np.ndarray, has_lo: np.ndarray, has_hi: np.ndarray,
-           r_dual: np.ndarray) -> float:
-    """The stopping measure of the module docstring."""
-    scale = max(1.0, float(np.max(np.abs(x.lam), initial=0.0)))
-    worst = [
-        max(0.0, -float(slack.min(initial=0.0))),
-        float(np.max(np.abs(np.minimum(x.lam / scale, slack)), initial=0.0)),
-        float(np.max(np.abs(r_dual), initial=0.0)) / max(1.0, float(np.max(np.abs(x.y), initial=0.0))),
-    ]
-    for mask, gap, multiplier in ((has_lo, x.y - lo, x.alpha), (has_hi, hi - x.y, x.beta)):
-        if mask.any():
-            worst += [max(0.0, -float(gap[mask].min())),
-                      float(np.max(np.abs(np.minimum(multiplier[mask] / scale, gap[mask]))))]
-    return max(worst)
+def _step(x: _Iterate, newton: _Newton) -> _Iterate:
+    """One iteration's move: Mehrotra's predictor–corrector with Gondzio's centrality correctors,
+    all with the one factorization of ``newton``."""
+    mu = _complementarity(x)
+    products = x.v * x.z
+    affine = newton.direction(-products)
+    sigma = min(1.0, (_complementarity(x, affine, *_lengths(x, affine)) / mu) ** 3) if mu > 0 else 0.0
+    target = sigma * mu - products - affine.v * affine.z
+    step = newton.direction(target)
+    primal, dual = _lengths(x, step)
+    box = (0.1 * sigma * mu, 10.0 * sigma * mu)
+    for _ in range(CORRECTORS):
+        # Gondzio's centrality corrector: aim at a longer step, pull the complementarity products
+        # of that trial point back into [0.1, 10]·σμ, and keep the correction when the step gets
+        # longer (one more solve with the same factorization).
+        a_p, a_d = min(1.0, 1.5 * primal + 0.1), min(1.0, 1.5 * dual + 0.1)
+        trial = (x.v + a_d * step.v) * (x.z + a_p * step.z)
+        shift = np.clip(trial, *box)
+        shift -= trial
+        np.maximum(shift, -box[1], out=shift)
+        shift += target
+        better = newton.direction(shift)
+        p2, d2 = _lengths(x, better)
+        if min(p2, d2) < 1.01 * min(primal, dual):
+            break
+        step, primal, dual, target = better, p2, d2, shift
+    return x.moved(step, STEP_FRACTION * primal, STEP_FRACTION * dual)
 
 
-def _result(best: _Iterate, error: float, iteration: int, status: str, start: float) -> IterativeSolution:
-    return IterativeSolution(best.y, np.maximum(best.lam, 0.0), iteration, status == "converged", status, error,
+def _error(x: _Iterate, gap: np.ndarray, r_dual: np.ndarray, k: int) -> float:
+    """The stopping measure of the module docstring: the largest of the violation of any row
+    (penetration or bound), the complementarity ``|min(v/scale, gap)|`` of any row (impulses
+    relative to the largest contact impulse) and the relative dual residual."""
+    scale = max(1.0, float(np.max(np.abs(x.v[:k]), initial=0.0)))
+    violation = max(0.0, -float(gap.min(initial=0.0)))
+    complementarity = float(np.max(np.abs(np.minimum(x.v / scale, gap)), initial=0.0))
+    dual = float(np.max(np.abs(r_dual), initial=0.0)) / max(1.0, float(np.max(np.abs(x.y), initial=0.0)))
+    return max(violation, complementarity, dual)
+
+
+def _result(best: _Iterate, error: float, iteration: int, status: str, k: int, start: float) -> IterativeSolution:
+    return IterativeSolution(best.y, np.maximum(best.v[:k], 0.0), iteration, status == "converged", status, error,
                              time.perf_counter() - start)
 
 

@@ -270,15 +270,19 @@ def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rate
     assert not slowed.error and slowed.colony.time == pytest.approx(free.colony.time, rel=0.3)
     assert slowed.colony.cells.n < 0.8 * free.colony.cells.n
     assert np.all(slowed.colony.rates > 0.5 * settings.model.rate)  # stored rates are the base rates
-    centers, rates, pressure = seen[-1]
-    effective = pressure_growth_rate(rates, pressure, stall_pressure=stall)
-    r = np.linalg.norm(centers - centers.mean(axis=0), axis=1)
-    inside, edge = r < np.quantile(r, 0.2), r > np.quantile(r, 0.8)
     # Slowest inside, where the pressure is highest (without pressure growth the inside and the
-    # edge draw their rates alike), and halved somewhere (measured 2026-12-02: inside 0.46, edge
-    # 0.55, slowest 0.27 of the base rate 0.69 to 0.77).
-    assert effective[edge].mean() > 1.1 * effective[inside].mean()
-    assert effective.min() < 0.5 * rates.max()
+    # edge draw their rates alike), and halved somewhere. Judged over the last 30 steps: one
+    # step of a 30-cell colony is one sample, and its ratio ranged over 1.07–3.9 with the
+    # interior point's start and correctors (2026-12-04); the median over 30 steps 1.5–1.8.
+    ratios, slowest = [], []
+    for centers, rates, pressure in seen[-30:]:
+        effective = pressure_growth_rate(rates, pressure, stall_pressure=stall)
+        r = np.linalg.norm(centers - centers.mean(axis=0), axis=1)
+        inside, edge = r < np.quantile(r, 0.2), r > np.quantile(r, 0.8)
+        ratios.append(effective[edge].mean() / effective[inside].mean())
+        slowest.append(effective.min() / rates.max())
+    assert np.median(ratios) > 1.1
+    assert min(slowest) < 0.5
     # The snapshot of the last state carries the mechanics the run ended with.
     snapshot = sorted((tmp_path / "run" / "snapshots").glob("*.npz"))[-1]
     from qpcontact.colony.snapshots import load_snapshot
