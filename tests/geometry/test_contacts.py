@@ -33,6 +33,30 @@ def test_broad_phase_finds_every_touching_pair(seed, margin):
     assert keyed(fast) == keyed(brute)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_broad_phase_with_slack_holds_every_pair_within_reach_after_the_cells_move(seed):
+    """candidate_pairs(cells, margin, slack) is a superset of the pairs within margin wherever
+    each cell's axis moves by at most its slack (turned, grown, shifted); a few cells move far
+    (searched on their own)."""
+    rng = np.random.default_rng(seed)
+    cells = random_scene(seed, n_cells=80, box=7.0)
+    far = rng.random(cells.n) < 0.05
+    shift = rng.normal(size=(cells.n, 3)) * np.where(far, 2.0, 0.2)[:, None]
+    axes = cells.axes + 0.2 * rng.normal(size=(cells.n, 3))
+    moved = cells.replace(centers=cells.centers + shift, axes=axes / np.linalg.norm(axes, axis=1)[:, None],
+                          lengths=cells.lengths * 1.1)
+    half0, half1 = 0.5 * cells.lengths[:, None], 0.5 * moved.lengths[:, None]
+    slack = np.maximum(np.linalg.norm(shift + half1 * moved.axes - half0 * cells.axes, axis=1),
+                       np.linalg.norm(shift - half1 * moved.axes + half0 * cells.axes, axis=1))
+    margin = 0.3
+    all_pairs = np.array(list(itertools.combinations(range(cells.n), 2)))
+    within = narrow_phase(moved, all_pairs, margin)
+    found = {tuple(p) for p in candidate_pairs(cells, margin, slack).tolist()}
+    needed = {(int(a), int(b)) for a, b in zip(within.cell_a, within.cell_b, strict=True)}
+    assert len(needed) > 20 and needed <= found
+    assert len(found) < len(all_pairs)  # still a search, not every pair
+
+
 def test_contact_geometry_of_two_crossed_rods():
     # a above b, axes x and z: closest points on the y axis, overlap 0.1.
     cells = rods([[0, 0.9, 0], [0, 0, 0]], [[1, 0, 0], [0, 0, 1]], [2.0, 2.0])
