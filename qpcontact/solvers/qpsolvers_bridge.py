@@ -17,7 +17,7 @@ least_squares, contact    lifted: ``min ½‖r‖² + ½ελ̃ᵀÃλ̃  s.t. Ã
 ========================  =================================================================
 
 Why not ``P = MᵀM + εI``: ``MᵀM`` is singular, a small Euclidean ε does not pin ``Δp`` down to
-solver tolerance, and forming it is slow (model.md, "What is already known"). The lifted forms
+solver tolerance, and forming it is slow (docs/model.md, "The QP formulations"). The lifted forms
 keep ``B̃`` as it is, and the minimum-W-norm choice is made exactly.
 
 :func:`tolerance_settings` translates the one dimensionless tolerance into each backend's own

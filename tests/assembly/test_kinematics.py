@@ -144,3 +144,43 @@ def test_erratum_2_a_body_point_rides_with_the_full_length_rate():
     assert fd == pytest.approx(sigma * cell.growth_rates[0], rel=1e-8)  # s/l · l̇, from the motion
     assert system_row(cell, sigma, e, axis) == pytest.approx(fd, rel=1e-7)
     assert abs(0.5 * sigma * cell.growth_rates[0] - fd) > 0.1 * abs(fd)  # the seed's factor ½ is off
+
+
+def test_erratum_3_no_stray_cross_product_after_the_angular_term():
+    """Correction 3 of docs/model.md: the original expansion of the velocity change has
+    ``−[r]× I⁻¹ΔL × r``, i.e. ``(ω × r) × r`` for ``ω = I⁻¹ΔL``: a vector perpendicular to the
+    motion ``ω × r`` of the point (and of units length²/time). For a cell that only turns, the
+    package's row equals the finite difference of the motion along the direction the point moves;
+    the stray form gives nothing along it."""
+    rng = np.random.default_rng(5)
+    cell = random_cell(rng).replace(momenta=np.zeros((1, 3)), growth_momenta=[0.0])
+    sigma, e = sample_point(rng, cell, False)
+    r = sigma * cell.lengths[0] * cell.axes[0] + cell.radii[0] * e
+    omega = cell.angular_velocities[0]
+    n = np.cross(omega, r)
+    n /= np.linalg.norm(n)
+    fd = n @ fd_velocity(cell, sigma, e)
+    assert fd > 0.1
+    assert system_row(cell, sigma, e, n) == pytest.approx(fd, rel=1e-7)
+    stray = np.cross(np.cross(omega, r), r)  # −[r]×(I⁻¹ΔL) × r
+    assert abs(n @ stray) < 1e-12 * np.linalg.norm(stray)
+    assert np.linalg.norm(stray) > 0.1
+
+
+def test_a_point_on_a_cap_rides_with_the_tip_not_with_its_own_axial_coordinate():
+    """docs/model.md, "Corrections to the original derivation": the original growth term
+    ``(â·r)/l`` uses the contact point's own axial coordinate; a point on a cap lies beyond the
+    tip (``|â·r| > l/2``) and would move faster than it. The caps ride with the tips: the axial
+    coordinate is clamped to ``±l/2``. For a cell that only grows, a point on the + cap moves
+    along the axis at ``½ l̇`` (finite differences), as the package's row says."""
+    rng = np.random.default_rng(9)
+    cell = random_cell(rng).replace(momenta=np.zeros((1, 3)), angular_momenta=np.zeros((1, 3)))
+    axis = cell.axes[0]
+    e = axis + 0.5 * np.cross(axis, [0.0, 0.0, 1.0])  # on the + cap, off the axis
+    e /= np.linalg.norm(e)
+    r = 0.5 * cell.lengths[0] * axis + cell.radii[0] * e
+    fd = axis @ fd_velocity(cell, 0.5, e)
+    assert fd == pytest.approx(0.5 * cell.growth_rates[0], rel=1e-8)
+    assert system_row(cell, 0.5, e, axis) == pytest.approx(fd, rel=1e-7)
+    unclamped = (axis @ r) / cell.lengths[0] * cell.growth_rates[0]
+    assert abs(unclamped - fd) > 0.1 * abs(fd)

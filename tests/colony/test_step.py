@@ -128,7 +128,7 @@ def test_a_failed_solve_is_raised_and_not_applied():
 
 
 def test_contacts_that_do_not_collide_before_the_solve_must_still_be_in_the_system():
-    """model.md puts only colliding (approaching) contacts into the system. Over a step that is
+    """The original design notes put only colliding (approaching) contacts into the system. Over a step that is
     not enough: A hits B, and B, touching C at rest (not approaching), is pushed into C unless
     the B–C contact is in the system too (``keep_separating``)."""
     from qpcontact.geometry.contacts import relative_normal_velocity
@@ -167,3 +167,24 @@ def test_a_runs_step_options_clear_an_overlap_that_steps_defaults_leave():
     assert largest_overlap(plain) == pytest.approx(0.067)
     assert largest_overlap(run_like) < 1e-9
     assert "Settings().step_options()" in step.__doc__ and "no position correction" in step.__doc__
+
+
+@pytest.mark.parametrize("dt, closes", [(0.05, True), (0.2, False)])
+def test_a_gap_within_the_margin_may_close_within_the_step_and_no_more(dt, closes):
+    """docs/model.md, "The velocity-level step": a contact at a gap ``d > 0`` within the margin
+    gets ``b = −u − d/dt``, not ``b = −u``. A sphere approaching a fixed one at speed 1 across a
+    gap of 0.1: with dt = 0.05 the gap cannot close within the step, so nothing stops it (``b =
+    −u`` would stop it 0.1 short); with dt = 0.2 it is slowed to ``d/dt`` = 0.5 and ends the step
+    touching."""
+    cells = q.Cells(centers=[[0.0, 0, 0], [1.1, 0, 0]], axes=[1, 0, 0], lengths=0.0, radii=0.5,
+                    masses=[1.0, np.inf])
+    drive = np.zeros((2, 7))
+    drive[0, 0] = 1.0
+    out = step(cells, dt, drive=drive, margin=0.3, solver="clarabel", tolerance=1e-9)
+    speed = out.cells.velocities[0, 0]
+    if closes:
+        assert speed == pytest.approx(1.0)
+        assert out.cells.centers[0, 0] == pytest.approx(0.05)
+    else:
+        assert speed == pytest.approx(0.1 / dt, rel=1e-6)
+        assert out.cells.centers[1, 0] - out.cells.centers[0, 0] == pytest.approx(1.0, abs=1e-7)  # touching

@@ -93,3 +93,24 @@ def test_normalizing_huge_and_tiny_axes_keeps_their_direction():
     """Issue 13, item 9: |a| of an axis of 1e200 overflowed, and the axis became zero."""
     cells = make(axes=[[1e200, 1e200, 0], [0, 3e-200, 4e-200]], normalize_axes=True)
     np.testing.assert_allclose(cells.axes, [[2**-0.5, 2**-0.5, 0], [0, 0.6, 0.8]], rtol=1e-15)
+
+
+def test_world_inverse_inertia_is_the_body_one_turned_from_x_to_the_axis():
+    """docs/model.md, "Corrections to the original derivation": the original writes
+    ``I⁻¹ = T I_cyl⁻¹ T⁻¹`` with ``T`` "from world to local coordinates, i.e. taking x to the
+    axis" — two opposite maps. The right one is ``R I_cyl⁻¹ Rᵀ`` with ``R`` taking the body x
+    axis to â (body to world), which is the axisymmetric form the package uses; the world-to-
+    body map in its place gives a different tensor."""
+    from scipy.spatial.transform import Rotation
+
+    axis = np.array([1.0, 2.0, 2.0]) / 3.0
+    cells = make(axes=[axis, [0, 1, 0]], lengths=[2.0, 1.0], masses=3.0)
+    m, rho, length = 3.0, 0.5, 2.0
+    body = np.diag([2 / (m * rho**2), 12 / (m * (3 * rho**2 + length**2)), 12 / (m * (3 * rho**2 + length**2))])
+    to_world = Rotation.align_vectors([axis], [[1.0, 0.0, 0.0]])[0].as_matrix()  # x ↦ â
+    assert np.allclose(to_world @ [1.0, 0.0, 0.0], axis)
+    world = to_world @ body @ to_world.T
+    w = np.random.default_rng(0).normal(size=(2, 3))
+    assert np.allclose(cells.apply_inverse_inertia(w)[0], world @ w[0])
+    wrong = to_world.T @ body @ to_world  # T taken as world → body
+    assert not np.allclose(wrong, world, atol=1e-3 * np.abs(world).max())

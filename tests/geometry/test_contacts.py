@@ -256,3 +256,29 @@ def test_the_pair_limit_can_be_raised_and_dense_colonies_stay_below_it(monkeypat
     monkeypatch.undo()
     dense = scenes.colony_3d(3000, seed=1)
     assert len(candidate_pairs(dense, margin=0.3)) < 20 * dense.n
+
+
+@pytest.mark.parametrize("v_a, v_b, approaching", [
+    ([2.0, 0.0, 0.0], [1.0, 0.0, 0.0], True),    # both move +x, a catches up: v_a·v_b > 0
+    ([-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], False),  # they move apart: v_a·v_b < 0
+])
+def test_approaching_is_the_relative_normal_velocity_not_the_sign_of_a_dot_product(v_a, v_b, approaching):
+    """Correction 4 of docs/model.md: a pair approaches when ``u = nᵀ(v_a − v_b) < 0``. The
+    original derivation's test, a negative dot product of the two contact points' velocities,
+    is wrong both ways: it misses a cell catching up with another and takes two cells moving
+    apart for a collision."""
+    cells = rods([[0, 0, 0], [0.9, 0, 0]], [[1, 0, 0]] * 2, 0.0, momenta=[v_a, v_b])
+    contacts = qc.find_contacts(cells)
+    assert len(contacts) == 1 and contacts.separation[0] < 0
+    c = contacts
+    point_a = cells.point_velocities(c.cell_a, c.offset_a, c.stretch_a)[0]
+    point_b = cells.point_velocities(c.cell_b, c.offset_b, c.stretch_b)[0]
+    assert (point_a @ point_b < 0) != approaching  # the original test gets it wrong
+    assert (c.normal_velocity[0] < 0) == approaching
+    active, _ = colliding(contacts)
+    assert (len(active) == 1) == approaching
+    result = qc.resolve(cells, solver="linear")
+    if approaching:  # equal masses: both leave at the mean velocity
+        assert np.allclose(result.cells.velocities[:, 0], 1.5)
+    else:
+        assert result.status == "no_contact"

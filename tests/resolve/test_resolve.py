@@ -125,7 +125,7 @@ def jammed_packing(overlap=0.05):
 
 
 def test_jammed_packing_without_position_correction_is_still_consistent():
-    """model.md says the plain solve leaves jammed contacts penetrating. Without position
+    """The original design notes say the plain solve leaves jammed contacts penetrating. Without position
     correction that cannot happen: b = −u = −J v lies in the range of M (x = −p solves it), so
     M x = b is consistent however many contacts there are."""
     cells = jammed_packing()
@@ -215,7 +215,7 @@ def test_backend_prints_do_not_reach_stdout(capfd):
 def test_plain_right_hand_side_is_always_consistent(name, n):
     """With b = −u (no position correction) stopping every cell, x = −p, solves Mx = b, so the
     plain solve never leaves a contact penetrating, even in a jammed packing with more contacts
-    than unknowns (model.md expects penetration there; it needs position correction with
+    than unknowns (the original design notes expect penetration there; it needs position correction with
     non-uniform overlaps)."""
     cells = scenes.make_scene(name, n)
     active, b = colliding(find_contacts(cells))

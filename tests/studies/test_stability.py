@@ -106,7 +106,7 @@ def test_large_cases_at_reduced_size_match_full_size_structure():
 
 
 def test_without_position_correction_mx_equals_b_is_consistent():
-    """model.md says least_squares and the plain solve differ for jammed packings, where the
+    """The original design notes say least_squares and the plain solve differ for jammed packings, where the
     plain solve leaves contacts penetrating. Without position correction that never happens:
     b = −u = M(−p) (stopping every cell satisfies every contact), so Mx = b is consistent even
     with more contacts than unknowns. Only position correction makes it over-determined."""
