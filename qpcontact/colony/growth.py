@@ -22,12 +22,16 @@ the contact solve, which pushes the neighbours out of the way. Volume including 
 
 Noise: each daughter's axis is turned by a small random angle (``axis_noise``, radians) to
 break the symmetry of a perfect chain, and may draw its own growth rate (``rate_noise``).
+
+Cell types and a model's own per-cell state (``Colony.cell_types``, ``Colony.cell_data``, as
+CellModeller's ``cell.cellType`` and ``cell.targetVol``): both daughters inherit their mother's
+row, and with per-type growth rates (``type_rates``) a newborn's mean rate is her type's.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,6 +57,13 @@ class Colony:
         owed: (N,) length still owed to the cell from its division [length] (module docstring).
         time: the simulated time [time].
         next_id: the id the next newborn cell gets (default: one more than the largest id).
+        cell_types: (N,) each cell's type, an integer >= 0 (default: all 0); daughters inherit
+            their mother's (:func:`divide`).
+        cell_data: a model's own per-cell arrays by name (default: none), e.g. a target volume
+            or a signal: each an array of numbers (or booleans) whose first axis has one entry
+            per cell; names are Python identifiers. Daughters inherit their mother's rows.
+            Replace an array to change it (``colony.replace(cell_data={**colony.cell_data,
+            "signal": s})``); the arrays are not copied.
     """
 
     cells: Cells
@@ -62,6 +73,8 @@ class Colony:
     owed: Any = 0.0
     time: float = 0.0
     next_id: int = -1
+    cell_types: Any = None
+    cell_data: Any = None
 
     def __post_init__(self) -> None:
         instance("Colony.cells", self.cells, Cells, "qpcontact.Cells")
@@ -94,6 +107,8 @@ class Colony:
             object.__setattr__(self, "next_id", int(self.ids.max(initial=-1)) + 1)
         elif n and self.next_id <= int(self.ids.max()):
             raise InvalidArgumentError(f"Colony.next_id: {self.next_id} is not above the largest id {int(self.ids.max())}")
+        object.__setattr__(self, "cell_types", _cell_types(self.cell_types, n))
+        object.__setattr__(self, "cell_data", _cell_data(self.cell_data, n))
 
     @classmethod
     def founder(cls, cells: Cells, rates: Any) -> Colony:
@@ -106,8 +121,71 @@ class Colony:
         return cls(cells, np.arange(cells.n), np.full(cells.n, -1), np.broadcast_to(rates, (cells.n,)))
 
     def replace(self, **changes: Any) -> Colony:
-        """A new, validated Colony with some fields replaced."""
+        """A new, validated Colony with some fields replaced.
+
+        A change of the number of cells that does not give ``cell_types`` and ``cell_data``
+        gives the defaults (type 0, no data) if the colony has only those, and raises otherwise
+        (use :meth:`subset`, which keeps them, or give them)."""
+        if "cells" in changes and getattr(changes["cells"], "n", self.cells.n) != self.cells.n:
+            if "cell_types" not in changes:
+                changes["cell_types"] = None if not self.cell_types.any() else self.cell_types
+            if "cell_data" not in changes:
+                changes["cell_data"] = None if not self.cell_data else self.cell_data
         return dataclasses.replace(self, **changes)
+
+    def subset(self, index: Any) -> Colony:
+        """The colony of the cells ``index`` selects (a boolean mask or integer indices, in
+        their order), every per-cell field kept aligned: cells, ids, lineage, rates, owed
+        length, types and ``cell_data``; time and ``next_id`` unchanged (ids are not reused)."""
+        index = np.asarray(index)
+        if index.dtype.kind not in "biu":
+            raise InvalidArgumentError(f"index: expected a boolean mask or integer indices, got {index.dtype} values")
+        if index.dtype.kind == "b" and index.shape != (self.cells.n,):
+            raise InvalidArgumentError(f"index: a mask needs one entry per cell ({self.cells.n}), got {index.shape}")
+        return self.replace(cells=self.cells.subset(index), ids=self.ids[index], parent_ids=self.parent_ids[index],
+                            rates=self.rates[index], owed=self.owed[index], cell_types=self.cell_types[index],
+                            cell_data={name: value[index] for name, value in self.cell_data.items()})
+
+
+def _cell_types(value: Any, n: int) -> np.ndarray:
+    """``Colony.cell_types`` checked: (n,) integers >= 0 (None: all 0)."""
+    if value is None:
+        return np.zeros(n, dtype=np.int64)
+    types = integer_array("Colony.cell_types", value)
+    if types.ndim == 0:
+        types = np.full(n, int(types), dtype=np.int64)
+    if types.shape != (n,):
+        raise InvalidArgumentError(f"Colony.cell_types: expected shape ({n},) (one per cell), got {types.shape}")
+    if np.any(types < 0):
+        raise InvalidArgumentError(f"Colony.cell_types: must be >= 0, got {int(types.min())}")
+    return types
+
+
+def _cell_data(value: Any, n: int) -> dict[str, np.ndarray]:
+    """``Colony.cell_data`` checked: a mapping of identifiers to numeric arrays whose first axis
+    is n (None: empty)."""
+    if value is None:
+        return {}
+    if not isinstance(value, Mapping):
+        raise InvalidArgumentError(f"Colony.cell_data: expected a dict of names to per-cell arrays, got "
+                                   f"{type(value).__name__}")
+    out = {}
+    for name, array in value.items():
+        if not (isinstance(name, str) and name.isidentifier()):
+            raise InvalidArgumentError(f"Colony.cell_data: names must be Python identifiers (letters, digits, _), got "
+                                       f"{name!r}")
+        try:
+            array = np.asarray(array)
+        except (TypeError, ValueError) as exc:  # ragged nesting
+            raise InvalidArgumentError(f"Colony.cell_data[{name!r}]: cannot be read as an array ({exc})") from None
+        if array.dtype.kind not in "biuf":
+            raise InvalidArgumentError(f"Colony.cell_data[{name!r}]: expected numbers or booleans, got an array of "
+                                       f"{array.dtype} values")
+        if array.shape[:1] != (n,):
+            raise InvalidArgumentError(f"Colony.cell_data[{name!r}]: expected one row per cell (first axis {n}), got "
+                                       f"shape {array.shape}")
+        out[name] = array
+    return out
 
 
 def volumes(cells: Cells) -> np.ndarray:
@@ -134,7 +212,7 @@ def growth_drive(cells: Cells, length_increase: np.ndarray, dt: float) -> np.nda
 
 def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.Generator, *,
            axis_noise: float = 0.02, rate_noise: float = 0.0, base_rate: float | None = None,
-           planar: bool = False) -> Colony:
+           planar: bool = False, type_rates: Any = None) -> Colony:
     """Split every cell with ``l >= division_length`` into two daughters (module docstring).
 
     Args:
@@ -147,10 +225,17 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
             (0 = daughters inherit the mother's rate).
         base_rate: mean growth rate for newborn cells (default: the mother's rate).
         planar: 2D monolayer: turn the axes about z only, so they stay in the xy-plane.
+        type_rates: mean growth rate of newborn cells of each type [1/time], indexed by
+            ``Colony.cell_types`` (a sequence, each > 0); replaces ``base_rate`` when given.
 
     Returns:
         The new colony: each mother replaced by daughter 1 (in her place), daughter 2 appended;
-        new ids, parent ids set. The colony itself when no cell divides.
+        new ids, parent ids set; both daughters with their mother's type and ``cell_data``
+        rows. The colony itself when no cell divides.
+
+    Raises:
+        InvalidArgumentError: bad arguments; a dividing cell whose type has no rate in
+            ``type_rates``.
     """
     if np.ndim(division_length) == 0:
         division_length = number("division_length", division_length, minimum=0.0, open_minimum=True)
@@ -163,10 +248,16 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
     rate_noise = number("rate_noise", rate_noise, minimum=0.0)
     base_rate = number("base_rate", base_rate, minimum=0.0, allow_none=True)
     planar = flag("planar", planar)
+    if type_rates is not None:
+        type_rates = check_type_rates("type_rates", type_rates)
     cells = colony.cells
     dividing = np.flatnonzero(cells.lengths >= division_length)
     if dividing.size == 0:
         return colony
+    mother_types = colony.cell_types[dividing]
+    if type_rates is not None and mother_types.max() >= type_rates.size:
+        raise InvalidArgumentError(f"type_rates: gives {type_rates.size} types (0 to {type_rates.size - 1}), but a "
+                                   f"dividing cell has type {int(mother_types.max())}")
     radii, lengths, axes = cells.radii[dividing], cells.lengths[dividing], cells.axes[dividing]
     daughter_length = lengths / 2 - radii
     if np.any(daughter_length <= 0):
@@ -200,7 +291,10 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         radii=split(cells.radii, radii, radii),
         **halved,
     )
-    mean_rate = colony.rates[dividing] if base_rate is None else np.full(m, float(base_rate))
+    if type_rates is not None:
+        mean_rate = type_rates[mother_types]
+    else:
+        mean_rate = colony.rates[dividing] if base_rate is None else np.full(m, float(base_rate))
     noise = rng.standard_normal((2, m)) if rate_noise else np.zeros((2, m))
     daughter_rates = np.maximum(mean_rate * (1.0 + rate_noise * noise), 0.0)
     new_ids = colony.next_id + np.arange(2 * m)
@@ -212,7 +306,24 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         rates=split(colony.rates, daughter_rates[0], daughter_rates[1]),
         owed=split(colony.owed, owed, owed),
         next_id=colony.next_id + 2 * m,
+        cell_types=split(colony.cell_types, mother_types, mother_types),
+        cell_data={name: split(value, value[dividing], value[dividing]) for name, value in colony.cell_data.items()},
     )
+
+
+def check_type_rates(name: str, value: Any) -> np.ndarray:
+    """Per-type growth rates [1/time] as a float array: a non-empty sequence of finite numbers
+    > 0, one per cell type (type ``k``'s rate is entry ``k``).
+
+    Raises:
+        InvalidArgumentError: naming ``name``.
+    """
+    rates = real_array(name, value, InvalidArgumentError)
+    if rates.ndim != 1 or rates.size == 0:
+        raise InvalidArgumentError(f"{name}: expected a list of rates, one per cell type, got shape {rates.shape}")
+    if not np.all(np.isfinite(rates) & (rates > 0)):
+        raise InvalidArgumentError(f"{name}: every rate must be finite and > 0, got {rates.tolist()}")
+    return rates
 
 
 def daughters_share(values: np.ndarray, before: Colony, after: Colony) -> np.ndarray:

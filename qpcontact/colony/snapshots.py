@@ -4,13 +4,13 @@ exactly (:mod:`qpcontact.colony.runs`); and the one mapping between :class:`~qpc
 and NPZ arrays (:func:`cell_arrays`, :func:`cells_from_arrays`), which the benchmark's scene
 cache uses too (:func:`save_cells`, :func:`load_cells`: the cell arrays alone, same names).
 
-Format (``numpy.savez_compressed``; every array is plain NumPy, no pickles), version 2:
+Format (``numpy.savez_compressed``; every array is plain NumPy, no pickles), version 3:
 
 =====================  ===========  =========================================================
 key                    shape        meaning
 =====================  ===========  =========================================================
 ``format``             ()           the string ``"qpcontact-colony"``
-``version``            ()           format version (integer: 2; version 1 files still load)
+``version``            ()           format version (integer: 3; versions 1 and 2 still load)
 ``time``               ()           simulated time [time], finite
 ``step``               ()           step index (integer >= -1; -1 if unknown): the number of
                                     steps taken to reach this state
@@ -28,6 +28,8 @@ key                    shape        meaning
 ``parent_ids``         (N,)         mother's id (integer dtype), -1 for a founder
 ``rates``              (N,)         growth rate [1/time], finite, >= 0
 ``owed``               (N,)         length still owed from division [length], finite, >= 0
+``cell_types``         (N,)         each cell's type (integer dtype, >= 0); version 3 (files
+                                    of versions 1 and 2 load with every type 0)
 *optional (version 2)*
 ``settings``           ()           JSON object (a string): the run's settings
                                     (:class:`qpcontact.colony.Settings` fields)
@@ -36,6 +38,8 @@ key                    shape        meaning
 ``extra.<name>``       any          extra per-run state, arrays keyed by name (letters,
                                     digits, ``_ . -``), e.g. a solver's warm-start data;
                                     numeric or boolean, no objects
+``data.<name>``        (N, ...)     a model's own per-cell arrays (``Colony.cell_data``),
+                                    keyed by a Python identifier; numeric or boolean; version 3
 ``qpcontact_version``  ()           the qpcontact version that wrote the file (information)
 ``pressure``           (N,)         each cell's pressure over the step that led to this state,
                                     compressive positive (:func:`qpcontact.cell_pressure`),
@@ -51,9 +55,11 @@ key                    shape        meaning
                                     (covers the mechanics keys too)
 =====================  ===========  =========================================================
 
-Version 1 is the same without the optional keys. Files with the mechanics keys are still
-version 2: readers that do not know them ignore them, and files without them load with
-``mechanics`` None. A run can start from either
+Version 1 is the same without the optional keys and without ``cell_types``; version 2 without
+``cell_types`` and ``data.*``. Cell types and a model's per-cell arrays raised the version to 3
+so that an older qpcontact refuses such a file instead of continuing a run without them. Files
+with the mechanics keys are still version 2: readers that do not know them ignore them, and
+files without them load with ``mechanics`` None. A run can start from either
 (``qpcontact simulate --start FILE``): from version 1, or a file without ``rng_state``, the
 random generator starts from the run's seed. Other tools may write either version.
 
@@ -92,9 +98,9 @@ from .growth import Colony
 from .mechanics import CellMechanics
 
 FORMAT = "qpcontact-colony"
-VERSION = 2
+VERSION = 3
 #: Versions :func:`load_snapshot` reads.
-SUPPORTED_VERSIONS = (1, 2)
+SUPPORTED_VERSIONS = (1, 2, 3)
 CELL_FIELDS = tuple(f.name for f in dataclasses.fields(Cells))
 COLONY_FIELDS = ("ids", "parent_ids", "rates", "owed")
 SCALAR_FIELDS = ("time", "step", "next_id")
@@ -104,6 +110,8 @@ MECHANICS_FIELDS = ("pressure", "stress", "stress_dimensions")
 CHECKSUM = "checksum"
 #: Prefix of the keys of the extra arrays.
 EXTRA_PREFIX = "extra."
+#: Prefix of the keys of a model's per-cell arrays (``Colony.cell_data``; version 3).
+DATA_PREFIX = "data."
 _EXTRA_NAME = re.compile(r"[A-Za-z0-9_.\-]+")
 
 
@@ -176,7 +184,7 @@ def load_cells(path: str | Path) -> Cells:
 def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: Mapping[str, Any] | None = None,
                 rng: np.random.Generator | Mapping[str, Any] | None = None,
                 extra: Mapping[str, Any] | None = None, mechanics: CellMechanics | None = None) -> Path:
-    """Write ``colony`` to ``path`` (format version 2, module docstring), atomically.
+    """Write ``colony`` to ``path`` (format version 3, module docstring), atomically.
 
     Args:
         path: the file; ``.npz`` is appended unless it ends so. Parent folders are created.
@@ -202,6 +210,8 @@ def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: M
                               "qpcontact_version": np.array(_writer_version())}
     arrays.update(cell_arrays(colony.cells))
     arrays.update({name: getattr(colony, name) for name in COLONY_FIELDS})
+    arrays["cell_types"] = colony.cell_types
+    arrays.update({DATA_PREFIX + name: value for name, value in colony.cell_data.items()})
     if settings is not None:
         arrays["settings"] = np.array(json.dumps(dict(settings)))
     if rng is not None:
@@ -248,7 +258,7 @@ def _verified(path: str | Path, data: Mapping[str, np.ndarray]) -> None:
 
 
 def load_colony(path: str | Path) -> tuple[Colony, int]:
-    """Read a snapshot (version 1 or 2). Returns ``(colony, step)``; :func:`load_snapshot` gives
+    """Read a snapshot (version 1, 2 or 3). Returns ``(colony, step)``; :func:`load_snapshot` gives
     everything.
 
     Raises:
@@ -282,7 +292,7 @@ def read_npz(path: str | Path) -> dict[str, np.ndarray]:
 
 
 def load_snapshot(path: str | Path) -> Snapshot:
-    """Read and check a snapshot (version 1 or 2, module docstring).
+    """Read and check a snapshot (version 1, 2 or 3, module docstring).
 
     Raises:
         InvalidSnapshotError: the file is missing, truncated or corrupted; not a qpcontact colony
@@ -309,8 +319,12 @@ def load_snapshot(path: str | Path) -> Snapshot:
             raise InvalidSnapshotError(f"{path}: {name} must be numbers, got dtype {data[name].dtype}")
     if np.any(data["ids"] < 0) or np.any(data["parent_ids"] < -1):
         raise InvalidSnapshotError(f"{path}: ids must be >= 0 and parent_ids >= -1")
+    if version >= 3:
+        _require(path, data, ("cell_types",))
+    cell_data = {k[len(DATA_PREFIX):]: v for k, v in data.items() if k.startswith(DATA_PREFIX)}
     colony = _checked(path, lambda: Colony(cells_from_arrays(data), data["ids"], data["parent_ids"], data["rates"],
-                                           data["owed"], time=float(time), next_id=next_id))
+                                           data["owed"], time=float(time), next_id=next_id,
+                                           cell_types=data.get("cell_types"), cell_data=cell_data))
     snapshot = Snapshot(colony, step, _json_object(path, data, "settings"), _json_object(path, data, "rng_state"),
                         {k[len(EXTRA_PREFIX):]: v for k, v in data.items() if k.startswith(EXTRA_PREFIX)}, version,
                         Path(path), _mechanics(path, data, colony.cells.n))

@@ -84,3 +84,92 @@ def test_colony_rejects_bad_lineage():
         Colony(cells, [0, 1], [-1, -1], [1.0, -1.0])
     with pytest.raises(InvalidArgumentError, match="shape"):
         Colony(cells, [0, 1, 2], [-1, -1], [1.0, 1.0])
+
+
+# ------------------------------------------------------------------------------------------
+# Issue 27: cell types and a model's own per-cell arrays
+# ------------------------------------------------------------------------------------------
+def three_cells(**colony_fields):
+    cells = q.Cells(centers=[[0, 0, 0], [10, 0, 0], [20, 0, 0]], axes=[[1, 0, 0]] * 3, lengths=[4.2, 1.0, 4.5],
+                    radii=0.5, masses=3.0, growth_inertia=30.0)
+    return Colony.founder(cells, rates=0.5).replace(**colony_fields)
+
+
+def test_daughters_inherit_their_mothers_type_and_cell_data():
+    colony = three_cells(cell_types=[3, 1, 2], cell_data={"targetVol": [4.0, 5.0, 6.0],
+                                                          "signals": np.arange(6.0).reshape(3, 2),
+                                                          "infected": np.array([True, False, False])})
+    after = divide(colony, 4.0, np.random.default_rng(0))
+    # Mothers 0 and 2 divide: daughter 1 in her place, daughter 2 appended in order.
+    assert list(after.ids) == [3, 1, 4, 5, 6] and list(after.parent_ids) == [0, -1, 2, 0, 2]
+    assert list(after.cell_types) == [3, 1, 2, 3, 2]
+    np.testing.assert_array_equal(after.cell_data["targetVol"], [4.0, 5.0, 6.0, 4.0, 6.0])
+    np.testing.assert_array_equal(after.cell_data["signals"], [[0, 1], [2, 3], [4, 5], [0, 1], [4, 5]])
+    np.testing.assert_array_equal(after.cell_data["infected"], [True, False, False, True, False])
+    assert after.cell_data["infected"].dtype == bool
+    assert divide(after, 100.0, np.random.default_rng(0)) is after  # nobody divides: nothing changes
+
+
+def test_types_default_to_zero_and_cell_data_to_empty():
+    colony = three_cells()
+    assert colony.cell_types.dtype == np.int64 and list(colony.cell_types) == [0, 0, 0]
+    assert colony.cell_data == {}
+    assert list(colony.replace(cell_types=2).cell_types) == [2, 2, 2]  # one type for all
+
+
+@pytest.mark.parametrize("changes, message", [
+    (dict(cell_types=[0, 1]), r"cell_types: expected shape \(3,\)"),
+    (dict(cell_types=[0, -1, 0]), "cell_types: must be >= 0"),
+    (dict(cell_types=[0.0, 1.0, 0.0]), "cell_types: expected integers"),
+    (dict(cell_types=["a", "b", "c"]), "cell_types: expected integers"),
+    (dict(cell_data=[1, 2, 3]), "cell_data: expected a dict"),
+    (dict(cell_data={"target vol": [1, 2, 3]}), "names must be Python identifiers"),
+    (dict(cell_data={1: [1, 2, 3]}), "names must be Python identifiers"),
+    (dict(cell_data={"x": [1, 2]}), r"cell_data\['x'\]: expected one row per cell \(first axis 3\)"),
+    (dict(cell_data={"x": 1.0}), r"cell_data\['x'\]: expected one row per cell"),
+    (dict(cell_data={"x": ["a", "b", "c"]}), r"cell_data\['x'\]: expected numbers or booleans"),
+    (dict(cell_data={"x": [1j, 2, 3]}), r"cell_data\['x'\]: expected numbers or booleans"),
+])
+def test_bad_cell_types_or_cell_data_are_named_errors(changes, message):
+    with pytest.raises(InvalidArgumentError, match=message):
+        three_cells(**changes)
+
+
+def test_subset_keeps_every_per_cell_field_aligned():
+    colony = three_cells(cell_types=[3, 1, 2], cell_data={"v": [4.0, 5.0, 6.0]}, owed=[0.1, 0.2, 0.3])
+    for index in ([2, 0], np.array([2, 0], dtype=np.uint8)):
+        kept = colony.subset(index)
+        assert list(kept.ids) == [2, 0] and list(kept.cell_types) == [2, 3]
+        np.testing.assert_array_equal(kept.cell_data["v"], [6.0, 4.0])
+        np.testing.assert_array_equal(kept.owed, [0.3, 0.1])
+        np.testing.assert_array_equal(kept.cells.lengths, [4.5, 4.2])
+    masked = colony.subset(np.array([False, True, True]))
+    assert list(masked.ids) == [1, 2] and masked.next_id == colony.next_id
+    with pytest.raises(InvalidArgumentError, match="a mask needs one entry per cell"):
+        colony.subset(np.array([True, False]))
+
+
+def test_per_type_rates_set_a_newborns_mean_rate():
+    colony = three_cells(cell_types=[1, 0, 0])
+    after = divide(colony, 4.0, np.random.default_rng(0), base_rate=0.9, type_rates=[0.2, 0.7])
+    # Mothers 0 (type 1) and 2 (type 0) divide; no noise: each daughter gets her type's rate.
+    np.testing.assert_array_equal(after.rates, [0.7, 0.5, 0.2, 0.7, 0.2])
+    noisy = divide(colony, 4.0, np.random.default_rng(0), rate_noise=0.1, type_rates=[0.2, 0.7])
+    assert noisy.rates[0] != 0.7 and noisy.rates[0] == pytest.approx(0.7, rel=0.5)
+    with pytest.raises(InvalidArgumentError, match="type_rates: gives 2 types .0 to 1., but a dividing cell has type 2"):
+        divide(colony.replace(cell_types=[2, 0, 0]), 4.0, np.random.default_rng(0), type_rates=[0.2, 0.7])
+    for bad in ([], [0.2, 0.0], [0.2, np.inf], [[0.2]]):
+        with pytest.raises(InvalidArgumentError, match="type_rates"):
+            divide(colony, 4.0, np.random.default_rng(0), type_rates=bad)
+
+
+def test_replacing_the_cells_by_fewer_keeps_defaults_and_refuses_to_drop_types():
+    colony = three_cells()
+    fewer = colony.replace(cells=colony.cells.subset([0]), ids=[0], parent_ids=[-1], rates=[0.5], owed=[0.0])
+    assert list(fewer.cell_types) == [0] and fewer.cell_data == {}
+    typed = three_cells(cell_types=[0, 1, 0])
+    with pytest.raises(InvalidArgumentError, match=r"cell_types: expected shape \(1,\)"):
+        typed.replace(cells=colony.cells.subset([0]), ids=[0], parent_ids=[-1], rates=[0.5], owed=[0.0])
+    with pytest.raises(InvalidArgumentError, match=r"cell_data\['v'\]: expected one row per cell"):
+        three_cells(cell_data={"v": [1, 2, 3]}).replace(cells=colony.cells.subset([0]), ids=[0], parent_ids=[-1],
+                                                        rates=[0.5], owed=[0.0])

@@ -25,18 +25,22 @@ CELL_NAMES = ("centers", "axes", "lengths", "radii", "masses", "growth_inertia",
               "growth_momenta")
 
 
-def a_colony() -> Colony:
+def a_colony(**changes) -> Colony:
     cells = q.Cells(centers=[[0, 0, 0], [3, 0, 1]], axes=[[1, 0, 0], [0, 0.6, 0.8]], lengths=[1.0, 2.5],
                     radii=[0.5, 0.4], masses=[1.0, np.inf], growth_inertia=[10.0, np.inf],
                     momenta=[[1, 2, 3], [0, 0, 0]], angular_momenta=[[0.1, 0, 0], [0, 0, 0]], growth_momenta=[0.5, 0])
-    return Colony(cells, [7, 9], [3, -1], [0.7, 0.0], [0.1, 0.0], time=12.5, next_id=11)
+    return Colony(cells, [7, 9], [3, -1], [0.7, 0.0], [0.1, 0.0], time=12.5, next_id=11).replace(**changes)
 
 
 def assert_same_colony(loaded: Colony, colony: Colony) -> None:
     for name in CELL_NAMES:
         np.testing.assert_array_equal(getattr(loaded.cells, name), getattr(colony.cells, name))
-    for name in ("ids", "parent_ids", "rates", "owed"):
+    for name in ("ids", "parent_ids", "rates", "owed", "cell_types"):
         np.testing.assert_array_equal(getattr(loaded, name), getattr(colony, name))
+    assert sorted(loaded.cell_data) == sorted(colony.cell_data)
+    for name, value in colony.cell_data.items():
+        assert loaded.cell_data[name].dtype == value.dtype
+        np.testing.assert_array_equal(loaded.cell_data[name], value)
     assert (loaded.time, loaded.next_id) == (colony.time, colony.next_id)
 
 
@@ -58,7 +62,7 @@ def test_version_2_carries_settings_random_state_and_extra_arrays(tmp_path):
     path = save_colony(tmp_path / "s.npz", a_colony(), 3, settings={"solver": "clarabel", "tolerance": 1e-6}, rng=rng,
                        extra=extra)
     snapshot = load_snapshot(path)
-    assert snapshot.version == VERSION == 2 and snapshot.step == 3
+    assert snapshot.version == VERSION == 3 and snapshot.step == 3
     assert snapshot.settings == {"solver": "clarabel", "tolerance": 1e-6}
     assert snapshot.generator().normal(size=5).tolist() == rng.normal(size=5).tolist()  # the same random numbers
     assert sorted(snapshot.extra) == sorted(extra)
@@ -75,16 +79,16 @@ def a_mechanics() -> CellMechanics:
 
 
 def test_snapshots_carry_the_cells_pressure_and_stress_and_stay_loadable_both_ways(tmp_path):
-    """The mechanics are three optional keys of version 2: a reader that does not know them
-    (an earlier qpcontact reads only the keys it names, and versions up to 2) ignores them, and
-    a file without them loads with ``mechanics`` None."""
+    """The mechanics are three optional keys (since version 2): a reader that does not know them
+    (an earlier qpcontact reads only the keys it names) ignores them, and a file without them
+    loads with ``mechanics`` None."""
     path = save_colony(tmp_path / "s.npz", a_colony(), 4, mechanics=a_mechanics())
     snapshot = load_snapshot(path)
     np.testing.assert_array_equal(snapshot.mechanics.pressure, [1.5, 0.0])
     np.testing.assert_array_equal(snapshot.mechanics.stress, a_mechanics().stress)
-    assert snapshot.mechanics.planar and snapshot.version == 2
+    assert snapshot.mechanics.planar and snapshot.version == VERSION
     with np.load(path) as data:
-        assert set(MECHANICS_FIELDS) <= set(data.files) and int(data["version"]) == 2
+        assert set(MECHANICS_FIELDS) <= set(data.files) and int(data["version"]) == VERSION
         assert int(data["stress_dimensions"]) == 2
     assert load_snapshot(save_colony(tmp_path / "t.npz", a_colony())).mechanics is None
     with pytest.raises(InvalidSnapshotError, match="mechanics: expected pressure"):
@@ -114,6 +118,30 @@ def test_version_1_snapshots_written_by_other_tools_still_load(tmp_path):
     snapshot = load_snapshot(tmp_path / "v1.npz")
     assert (snapshot.version, snapshot.step, snapshot.settings, snapshot.rng_state, snapshot.extra) == (1, 7, None, None, {})
     assert_same_colony(snapshot.colony, colony)
+
+
+def test_cell_types_and_a_models_per_cell_arrays_load_back_equal(tmp_path):
+    """Version 3: the types and every cell_data array (any dtype and trailing shape) are saved
+    and load back equal, under the checksum."""
+    colony = a_colony(cell_types=[2, 0], cell_data={"targetVol": [3.5, 4.25], "signals": np.arange(6.0).reshape(2, 3),
+                                                    "infected": np.array([True, False]), "count": np.array([3, 1])})
+    path = save_colony(tmp_path / "s.npz", colony, 5)
+    assert_same_colony(load_colony(path)[0], colony)
+    with np.load(path) as data:
+        assert {"cell_types", "data.targetVol", "data.signals", "data.infected", "data.count"} <= set(data.files)
+    damaged = np.array([2, 1])  # a changed type is caught by the checksum
+    rewrite(path, keep_checksum=True, cell_types=damaged)
+    with pytest.raises(InvalidSnapshotError, match="damaged"):
+        load_colony(path)
+
+
+def test_version_2_snapshots_load_with_type_0_and_no_cell_data(tmp_path):
+    path = save_colony(tmp_path / "s.npz", a_colony(cell_types=[1, 1], cell_data={"x": [1.0, 2.0]}), 5)
+    rewrite(path, version=np.array(2), cell_types=None, **{"data.x": None})
+    snapshot = load_snapshot(path)
+    assert snapshot.version == 2
+    np.testing.assert_array_equal(snapshot.colony.cell_types, [0, 0])
+    assert snapshot.colony.cell_data == {}
 
 
 def test_save_colony_returns_the_file_it_wrote(tmp_path):
@@ -195,7 +223,13 @@ def rewrite(path, keep_checksum=False, **changes):
     (dict(rates=np.array([0.7, np.nan])), "rates: must be finite"),
     (dict(centers=np.array([[0, 0, np.nan], [3, 0, 1]])), "centers"),
     (dict(lengths=np.array([1.0, 2.0, 3.0])), "lengths"),
-    (dict(version=np.array(3)), "snapshot version 3 .newer than this qpcontact"),
+    (dict(version=np.array(4)), "snapshot version 4 .newer than this qpcontact"),
+    (dict(cell_types=None), "misses cell_types"),
+    (dict(cell_types=np.array([0.0, 1.0])), "cell_types: expected integers"),
+    (dict(cell_types=np.array([0, -1])), "cell_types: must be >= 0"),
+    (dict(cell_types=np.array([0, 1, 2])), r"cell_types: expected shape \(2,\)"),
+    (dict(**{"data.signal": np.zeros(3)}), r"cell_data\['signal'\]: expected one row per cell"),
+    (dict(**{"data.a-b": np.zeros(2)}), "names must be Python identifiers"),
     (dict(format=np.array("something-else")), "not a qpcontact-colony snapshot"),
     (dict(owed=None), "misses owed"),
     (dict(settings=np.array("[1, 2]")), "settings must be a JSON object"),
@@ -247,13 +281,14 @@ def test_a_snapshot_of_a_newer_format_is_refused_with_a_clear_message(tmp_path, 
         load(path)
 
 
-@pytest.mark.parametrize("name", ["centers", "ids", "rates", "time", "extra.warm.impulse", "settings"])
+@pytest.mark.parametrize("name", ["centers", "ids", "rates", "time", "extra.warm.impulse", "settings", "cell_types",
+                                  "data.signal"])
 def test_a_snapshot_with_a_flipped_byte_in_an_array_is_refused(tmp_path, name):
     """Arrays damaged and written again (the ZIP's CRC then matches): loaded silently before;
     the checksum stored with the arrays refuses them now."""
-    path = save_colony(tmp_path / "s.npz", a_colony(), 1, settings={"seed": 1},
-                       extra={"warm.impulse": np.array([0.5, 0.25])})
-    assert_same_colony(load_colony(path)[0], a_colony())
+    colony = a_colony(cell_types=[1, 0], cell_data={"signal": [0.25, 0.5]})
+    path = save_colony(tmp_path / "s.npz", colony, 1, settings={"seed": 1}, extra={"warm.impulse": np.array([0.5, 0.25])})
+    assert_same_colony(load_colony(path)[0], colony)
     with np.load(path) as data:
         damaged = data[name].copy()
     damaged.reshape(-1).view(np.uint8)[min(3, damaged.nbytes - 1)] ^= 0x10
