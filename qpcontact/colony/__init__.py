@@ -24,6 +24,8 @@
   (:class:`RunFolder`), history appends, atomic snapshots, Ctrl-C, resuming, ``config.toml``;
 - :mod:`.hooks`: model hooks, the user's per-step function (:class:`StepControl`);
 - :mod:`.paraview`: ParaView files (``.vtu`` per snapshot, ``.pvd`` series; needs meshio);
+- :mod:`.cellmodeller`: CellModeller's saved states (its pickles, read by an unpickler that
+  builds nothing else) as snapshots: :func:`read_cellmodeller`, ``qpcontact import-cellmodeller``;
 - :mod:`.plots`: pictures of a run (matplotlib; imported only when drawing:
   ``from qpcontact.colony import plots``).
 
@@ -31,6 +33,7 @@ Imports the geometry, assembly, solvers and resolve wings only.
 """
 
 from ..geometry.motion import rotate
+from .cellmodeller import CellModellerState, read_cellmodeller
 from .growth import (
     Colony,
     daughters_share,
@@ -62,10 +65,10 @@ from .snapshots import Snapshot, load_colony, load_snapshot, save_colony
 from .step import StepResult, advance, largest_overlap, overlap_fractions, step
 
 __all__ = [
-    "CellMechanics", "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
+    "CellMechanics", "CellModellerState", "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
     "PositionStepResult", "PressureGrowth", "Run", "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
     "cell_forces", "cell_pressure", "cell_stress", "fit_parabola", "pressure_growth_rate", "radial_profile",
-    "StepControl", "StepOutcome", "StepResult", "advance", "daughters_share", "divide", "expansion_time_step", "grow",
+    "read_cellmodeller", "StepControl", "StepOutcome", "StepResult", "advance", "daughters_share", "divide", "expansion_time_step", "grow",
     "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",
     "overlap_fractions", "position_step", "push", "rotate", "run_colony", "save_colony", "step", "volumes",
