@@ -8,7 +8,9 @@ the plain linear solve, MPRGP, every qpsolvers backend) → :mod:`~qpcontact.res
 :mod:`~qpcontact.colony` (the position-level step :func:`position_step` — what ``qpcontact simulate``
 runs — and :func:`grow_position`; the velocity-level :func:`step` and :func:`grow`; :class:`Colony`,
 snapshots, CellModeller's states (:func:`read_cellmodeller`); the stress and
-pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`). The studies
+pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`; tables
+of a snapshot's cells and of a run's steps as pandas DataFrames: :func:`colony_frame`,
+:func:`run_frame`). The studies
 (:mod:`qpcontact.studies`: scenes, catalogue, comparison, stability, benchmark, demo) sit on
 top and are not imported here. docs/architecture.md describes the layout.
 """
@@ -24,6 +26,7 @@ from .colony import (
     cell_forces,
     cell_pressure,
     cell_stress,
+    colony_frame,
     divide,
     expansion_time_step,
     grow,
@@ -33,6 +36,7 @@ from .colony import (
     position_step,
     pressure_growth_rate,
     read_cellmodeller,
+    run_frame,
     save_colony,
     step,
 )
@@ -58,7 +62,7 @@ __all__ = [
     "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
     "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
     "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
-    "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
-    "load_colony", "plane_contacts", "pressure_growth_rate", "read_cellmodeller", "reference_solution", "resolve", "save_colony", "solve_system", "step",
+    "colony_frame", "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
+    "load_colony", "plane_contacts", "pressure_growth_rate", "read_cellmodeller", "reference_solution", "resolve", "run_frame", "save_colony", "solve_system", "step",
     "substrate",
 ]

@@ -111,7 +111,9 @@ class Setting:
         table, key: where it lives (``[table] key`` in TOML, ``settings.table.key`` in Python).
         name: its one name (``position_tolerance``; ``cells``): what ``--vary`` and run names use.
         flag: its command-line flag (``--position-tolerance``).
-        kind: the value's type: ``int``, ``float``, ``str`` or ``bool``.
+        kind: the value's type: ``int``, ``float``, ``str``, ``bool`` or ``tuple`` (a list of
+            numbers, annotated ``tuple[float, ...]``: the bounds hold for each; written
+            ``0.5,0.3`` as a flag, ``[0.5, 0.3]`` in TOML; empty, ``none``, for "not given").
         optional: it may be None (written ``none``).
         default: its default value.
         description: unit, help, bounds.
@@ -139,8 +141,10 @@ class Setting:
 
 def show(value: Any) -> str:
     """A value as a user writes it (``none``, ``true``, ``0.001``)."""
-    if value is None:
+    if value is None or value == ():
         return NONE
+    if isinstance(value, tuple):
+        return ",".join(map(show, value))
     if isinstance(value, bool):
         return "true" if value else "false"
     if value == "":
@@ -155,6 +159,10 @@ def _kind(annotation: Any) -> tuple[type, bool]:
         if len(members) != 1:
             raise TypeError(f"a setting has one type (or it and None), got {annotation!r}")
         return members[0], True
+    if typing.get_origin(annotation) is tuple:
+        if typing.get_args(annotation) != (float, ...):
+            raise TypeError(f"a list setting is a tuple[float, ...], got {annotation!r}")
+        return tuple, False
     return annotation, False
 
 
@@ -231,6 +239,8 @@ def check_value(s: Setting | tuple[str, Description, type, bool], value: Any) ->
     key, description, kind, optional = ((s.key, s.description, s.kind, s.optional) if isinstance(s, Setting) else s)
     if value is None and optional:
         return None
+    if kind is tuple:
+        return _check_list(key, description, value)
     words = {str: "a string", bool: "true or false", int: "an integer", float: "a number"}[kind]
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         value = float(value)
@@ -249,11 +259,26 @@ def check_value(s: Setting | tuple[str, Description, type, bool], value: Any) ->
     return value
 
 
+def _check_list(key: str, description: Description, value: Any) -> tuple[float, ...]:
+    """A list setting's value as a tuple of floats, each checked as a number with the bounds."""
+    if not isinstance(value, (list, tuple)):
+        raise InvalidArgumentError(f"{key}: expected a list of numbers (or none), got {value!r}")
+    item = (key, description, float, False)
+    try:
+        return tuple(check_value(item, number) for number in value)
+    except InvalidArgumentError as exc:
+        raise InvalidArgumentError(f"{key}: expected a list of numbers, each {str(exc).split(': expected ', 1)[1]}"
+                                   ) from None
+
+
 def check_fields(obj: Any) -> None:
     """Check every described field of the dataclass instance ``obj`` (:func:`check_value`);
-    a dataclass's ``__post_init__`` calls it."""
+    a dataclass's ``__post_init__`` calls it. A list given as a list is stored as a tuple (so
+    that the settings stay hashable and compare equal however they were given)."""
     for f, description, kind, optional in described_fields(type(obj)):
-        check_value((f.name, description, kind, optional), getattr(obj, f.name))
+        value = check_value((f.name, description, kind, optional), getattr(obj, f.name))
+        if kind is tuple:
+            object.__setattr__(obj, f.name, value)
 
 
 def parse_text(s: Setting, text: str) -> Any:
@@ -265,6 +290,13 @@ def parse_text(s: Setting, text: str) -> Any:
     """
     if s.optional and text.strip().lower() == NONE:
         return None
+    if s.kind is tuple:
+        words = [] if text.strip().lower() in (NONE, "") else text.split(",")
+        try:
+            numbers = [float(word) for word in words]
+        except ValueError:
+            raise InvalidArgumentError(f"{s.key}: cannot read {text!r} as numbers separated by commas") from None
+        return check_value(s, numbers)
     try:
         if s.kind is bool:
             value: Any = _BOOL_WORDS[text.strip().lower()]
@@ -358,12 +390,13 @@ def merge(tree: type, layers: Iterable[Layer], base: Any = None) -> Any:
 
 
 def to_tables(settings: Any, keep: Callable[[Setting], bool] | None = None) -> dict[str, dict[str, Any]]:
-    """The settings as ``{table: {key: value}}`` (the TOML and JSON form), optionally only
-    those ``keep`` keeps; tables left empty are left out."""
+    """The settings as ``{table: {key: value}}`` (the TOML and JSON form: a list setting as a
+    list), optionally only those ``keep`` keeps; tables left empty are left out."""
     out: dict[str, dict[str, Any]] = {}
     for s in settings_of(type(settings)):
         if keep is None or keep(s):
-            out.setdefault(s.table, {})[s.key] = getattr(getattr(settings, s.table), s.key)
+            value = getattr(getattr(settings, s.table), s.key)
+            out.setdefault(s.table, {})[s.key] = list(value) if s.kind is tuple else value
     return out
 
 
@@ -397,7 +430,7 @@ def _text_type(s: Setting) -> Callable[[str], Any]:
         except InvalidArgumentError as exc:
             raise argparse.ArgumentTypeError(str(exc).split(": ", 1)[1]) from None
 
-    convert.__name__ = {bool: "on/off", int: "integer", float: "number"}.get(s.kind, "text")
+    convert.__name__ = {bool: "on/off", int: "integer", float: "number", tuple: "list"}.get(s.kind, "text")
     return convert
 
 
@@ -412,7 +445,7 @@ def add_flags(tree: type, parser: argparse.ArgumentParser, title: Callable[[str,
         for s in settings_of(tree):
             if s.table != name:
                 continue
-            metavar = None if s.description.choices else {int: "N", float: "X", bool: "on|off"}.get(
+            metavar = None if s.description.choices else {int: "N", float: "X", bool: "on|off", tuple: "X,X,..."}.get(
                 s.kind, "FILE" if s.description.path else "NAME")
             choices = s.description.choices
             # A flag setting given alone means on (--vtk); --vtk off says it.

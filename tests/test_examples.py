@@ -86,6 +86,17 @@ def test_a_solver_comparison_on_your_own_scene(capsys):
 
 def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
     assert run_example("model_hook", "--out", str(tmp_path / "script")) == 0
+    import numpy as np
+
+    from qpcontact.colony.snapshots import load_snapshot
+
+    # Issue 27: types by lineage (before, drawn per cell id: sisters differed half the time).
+    colony = load_snapshot(sorted((tmp_path / "script" / "snapshots").glob("step_*.npz"))[-1]).colony
+    assert set(colony.cell_types) == {0, 1}
+    sisters = [np.flatnonzero(colony.parent_ids == parent) for parent in set(colony.parent_ids) - {-1}]
+    pairs = [s for s in sisters if len(s) == 2]
+    assert len(pairs) >= 10 and all(colony.cell_types[a] == colony.cell_types[b] for a, b in pairs)
+    assert np.all((colony.cell_data["division_length"] >= 3.0) & (colony.cell_data["division_length"] <= 5.0))
     from qpcontact.cli import main
 
     assert main(["simulate", "--hook", str(EXAMPLES / "model_hook.py"), "--cells", "4", "--out", str(tmp_path / "cli"),

@@ -12,7 +12,8 @@
   :func:`grow_position` (position-level step), :func:`divide`, the time-step rules
   :func:`growth_time_step` and :func:`expansion_time_step`;
 - :mod:`.snapshots`: colony snapshots as NPZ (:func:`save_colony`, :func:`load_colony`,
-  :func:`load_snapshot`; format version 2 with the run's settings, step and random state), the
+  :func:`load_snapshot`; format version 3 with the run's settings, step, random state, cell
+  types and a model's per-cell arrays), the
   one reader and writer of cells in NPZ files;
 - :mod:`.settings`: the settings of a run, one table per concern (:class:`Settings`:
   :class:`ModelSettings`, :class:`RunSettings`, :class:`OutputSettings`, :class:`PositionSettings`,
@@ -27,7 +28,11 @@
 - :mod:`.cellmodeller`: CellModeller's saved states (its pickles, read by an unpickler that
   builds nothing else) as snapshots: :func:`read_cellmodeller`, ``qpcontact import-cellmodeller``;
 - :mod:`.plots`: pictures of a run (matplotlib; imported only when drawing:
-  ``from qpcontact.colony import plots``).
+  ``from qpcontact.colony import plots``); :mod:`.picture`: ``qpcontact plot``, a snapshot
+  drawn again;
+- :mod:`.tables`: one row per cell of a snapshot, one row per step of a run
+  (:func:`colony_frame`, :func:`run_frame`: pandas DataFrames, the extra ``qpcontact[table]``;
+  ``qpcontact table``: CSV or Parquet).
 
 Imports the geometry, assembly, solvers and resolve wings only.
 """
@@ -63,13 +68,15 @@ from .settings import ModelSettings, OutputSettings, RunSettings, Settings, Velo
 from .simulate import Run, StepOutcome, run_colony
 from .snapshots import Snapshot, load_colony, load_snapshot, save_colony
 from .step import StepResult, advance, largest_overlap, overlap_fractions, step
+from .tables import colony_columns, colony_frame, run_frame
 
 __all__ = [
     "CellMechanics", "CellModellerState", "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
     "PositionStepResult", "PressureGrowth", "Run", "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
     "cell_forces", "cell_pressure", "cell_stress", "fit_parabola", "pressure_growth_rate", "radial_profile",
-    "read_cellmodeller", "StepControl", "StepOutcome", "StepResult", "advance", "daughters_share", "divide", "expansion_time_step", "grow",
+    "read_cellmodeller", "StepControl", "StepOutcome", "StepResult", "advance", "colony_columns", "colony_frame", "daughters_share", "divide",
+    "expansion_time_step", "grow",
     "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",
-    "overlap_fractions", "position_step", "push", "rotate", "run_colony", "save_colony", "step", "volumes",
+    "overlap_fractions", "position_step", "push", "rotate", "run_colony", "run_frame", "save_colony", "step", "volumes",
 ]

@@ -2,12 +2,14 @@
 
 A hook is a function ``hook(colony, step)`` that :func:`qpcontact.colony.run_colony` calls at
 the start of every step, before the time step is chosen, with the colony (a
-:class:`~qpcontact.Colony`: ``cells``, ``ids``, ``parent_ids``, ``rates``, ``owed``, ``time``)
-and the step index. It returns
+:class:`~qpcontact.Colony`: ``cells``, ``ids``, ``parent_ids``, ``rates``, ``owed``, ``time``,
+``cell_types``, ``cell_data``) and the step index. It returns
 
 - ``None``: nothing changes;
 - a :class:`~qpcontact.Colony`: the colony to step from, e.g. with other growth rates
-  (``colony.replace(rates=...)``), or with some cells removed;
+  (``colony.replace(rates=...)``), other cell types (``colony.replace(cell_types=...)``), its
+  own per-cell arrays (``colony.replace(cell_data={**colony.cell_data, "signal": s})``), or
+  with some cells removed (``colony.subset(keep)``, which keeps every per-cell field aligned);
 - a :class:`StepControl`, which may also give extra momenta per cell (forces) and the division
   rule of this step.
 
@@ -29,11 +31,17 @@ the hook sets theirs from the next step on. (The same laws without a hook: the m
 ``pressure_growth`` and ``stall_pressure``, ``qpcontact simulate --pressure-growth linear``,
 under which a newborn's first step is slowed by her mother's pressure.)
 
-A hook that depends only on what it is given (the colony, its ids and time, the step, the
-mechanics, which the snapshots keep) continues exactly when a run is resumed from a snapshot. A
-hook that needs random numbers can draw them from a generator seeded by the cell id
-(``np.random.default_rng([seed, id])``) so that they do not depend on the order of the calls;
-state a hook keeps for itself is not saved.
+A model's per-cell state belongs in the colony: ``cell_types`` (an integer per cell, e.g.
+CellModeller's ``cellType``) and ``cell_data`` (arrays by name, e.g. a ``targetVol`` or a
+signal). Both daughters inherit their mother's rows at division, and the snapshots save them,
+so a run resumed from one has them back. A hook that depends only on what it is given (the
+colony with its types and arrays, the step, the mechanics, which the snapshots keep) continues
+exactly when a run is resumed from a snapshot. A hook that needs random numbers can draw them
+from a generator seeded by the cell id (``np.random.default_rng([seed, id])``) so that they do
+not depend on the order of the calls. State a hook keeps elsewhere (a dictionary of its own,
+a global) is not saved and is lost on ``--resume``. With per-type growth rates (the model
+setting ``type_rates``) a cell whose type the hook changes keeps her rate; her daughters get
+their type's.
 """
 
 from __future__ import annotations

@@ -8,7 +8,10 @@ the optional extra ``qpcontact[vtk]``) holds, for N cells:
 - cells: a ``vertex`` at each centre (N), and a ``line`` from end to end of each axis (N);
 - data on every point and every cell (an end point carries its cell's values): ``axis`` (3,
   unit vector), ``length`` (cylinder length), ``radius``, ``id``, ``parent_id`` (-1 for a
-  founder), ``growth_rate`` [1/time], ``velocity`` (3) — in the colony's units (µm and doubling
+  founder), ``growth_rate`` [1/time], ``velocity`` (3), ``cell_type`` (integer), and each of
+  the model's own per-cell arrays (``Colony.cell_data``) under its name (``data_<name>`` if that
+  name is one of these; booleans as 0/1; an array of several numbers per cell flattened to
+  that many components) — in the colony's units (µm and doubling
   times in ``qpcontact simulate``); with the cells' mechanics (a run's snapshots) also
   ``pressure`` (compressive positive) and ``stress`` (9 components, the 3 × 3 virial stress row
   by row, tension positive; ParaView reads 9 components as a tensor): per footprint area in a
@@ -37,7 +40,7 @@ from .growth import Colony
 from .mechanics import CellMechanics
 
 #: The arrays on every point and cell, in order.
-ARRAYS = ("axis", "length", "radius", "id", "parent_id", "growth_rate", "velocity")
+ARRAYS = ("axis", "length", "radius", "id", "parent_id", "growth_rate", "velocity", "cell_type")
 #: The arrays added when the cells' mechanics are given.
 MECHANICS_ARRAYS = ("pressure", "stress")
 
@@ -60,12 +63,18 @@ def available() -> bool:
 
 
 def cell_data(colony: Colony, mechanics: CellMechanics | None = None) -> dict[str, np.ndarray]:
-    """The per-cell arrays of :data:`ARRAYS` (and :data:`MECHANICS_ARRAYS` with ``mechanics``)."""
+    """The per-cell arrays of :data:`ARRAYS` (and :data:`MECHANICS_ARRAYS` with ``mechanics``),
+    then the colony's ``cell_data`` (module docstring)."""
     cells = colony.cells
     data = {"axis": cells.axes, "length": cells.lengths, "radius": cells.radii, "id": colony.ids,
-            "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities}
+            "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities,
+            "cell_type": colony.cell_types}
     if mechanics is not None:
         data.update(pressure=mechanics.pressure, stress=mechanics.stress.reshape(cells.n, 9))
+    for name, values in colony.cell_data.items():
+        values = values.astype(np.int8) if values.dtype.kind == "b" else values
+        key = f"data_{name}" if name in ARRAYS or name in MECHANICS_ARRAYS else name
+        data[key] = values.reshape(cells.n, -1) if values.ndim > 2 else values
     return data
 
 

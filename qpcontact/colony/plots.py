@@ -4,8 +4,10 @@ without pyplot, so importing this module leaves the process's matplotlib backend
 - :func:`draw_colony`: the cells seen from above (+z, the x–y plane) or from the side (−y, the
   x–z plane), each capsule outlined exactly and coloured by the orientation of its axis in the
   xy-plane (a cyclic colour map: a rod and its reverse have the same colour), or by a value per
-  cell such as its pressure (``values``, with a colour bar in its units); static planes (walls,
-  the substrate) seen edge-on in that view are drawn as thick grey lines.
+  cell such as its pressure (``values``, with a colour bar in its units), or by a category such
+  as its type (``discrete``: one colour per integer); static planes (walls, the substrate) seen
+  edge-on in that view are drawn as thick grey lines. :func:`colony_colors` picks the values a
+  run's ``--color`` names.
 - :func:`save_colony_picture`: the top view, and with ``side_view`` (3D colonies) a side view
   under it.
 - :func:`plot_pressure_profile`: the pressure of each cell of a 2D colony against its distance
@@ -27,15 +29,18 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import matplotlib
 import numpy as np
 from matplotlib.animation import FuncAnimation, PillowWriter
 from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
+from matplotlib.colors import Colormap, ListedColormap
 from matplotlib.figure import Figure
 
 from ..errors import InvalidArgumentError
 from ..geometry import Cells
-from .mechanics import fit_parabola, radial_distances, radial_profile
+from .growth import Colony
+from .mechanics import CellMechanics, fit_parabola, radial_distances, radial_profile
 
 #: Points per semicircular cap of a drawn capsule.
 CAP_POINTS = 8
@@ -45,6 +50,44 @@ VIEWS = {"top": (0, 1, 2), "side": (0, 2, 1)}
 #: free cell of volume V at f/V): what the pressure's units are made of.
 FORCE_UNIT = "F: moves 1 µm³ of cell at 1 µm per doubling time"
 ORIENTATION_LABEL = "axis orientation in the xy-plane [deg]"
+#: What a colony picture can be coloured by besides a model's own per-cell arrays (``cell_data``):
+#: :func:`colony_colors`.
+COLORINGS = ("orientation", "pressure", "cell_type")
+
+
+def colony_colors(color: str, colony: Colony, mechanics: CellMechanics | None, planar: bool) -> dict[str, Any]:
+    """The colouring options of :func:`draw_colony` / :func:`save_colony_picture` that ``color``
+    names: ``orientation`` (none: by axis angle), ``pressure`` (``mechanics.pressure``, zero
+    without mechanics, with its units), ``cell_type`` (one colour per type), or the name of one
+    of ``colony.cell_data``'s arrays with one number per cell.
+
+    Raises:
+        InvalidArgumentError: ``color`` names none of these, or an array with more than one
+            number per cell.
+    """
+    if color == "orientation":
+        return {}
+    if color == "pressure":
+        pressure = np.zeros(colony.cells.n) if mechanics is None else mechanics.pressure
+        return dict(values=pressure, value_label=pressure_label(planar))
+    if color == "cell_type":
+        return dict(values=colony.cell_types, value_label="cell type", discrete=True)
+    if color in colony.cell_data:
+        values = colony.cell_data[color]
+        if values.ndim != 1:
+            raise InvalidArgumentError(f"color: cell_data {color!r} has {values.shape[1:]} numbers per cell; a colour "
+                                       "needs one")
+        return dict(values=values.astype(float), value_label=f"{color} (cell_data)")
+    known = [*COLORINGS, *(name for name, v in colony.cell_data.items() if v.ndim == 1)]
+    raise InvalidArgumentError(f"color: {color!r} is none of {', '.join(known)}")
+
+
+def category_map(count: int) -> Colormap:
+    """A colour map of ``count`` distinct colours for the integers 0..count-1 (matplotlib's
+    ``tab10``, or ``tab20`` beyond ten; beyond twenty, colours repeat)."""
+    base = matplotlib.colormaps["tab10" if count <= 10 else "tab20"]
+    colors = [base(i % base.N) for i in range(max(count, 1))]
+    return ListedColormap(colors)
 
 
 def pressure_label(planar: bool, length_unit: str = "µm") -> str:
@@ -90,17 +133,26 @@ def draw_planes(ax: Axes, planes: Sequence[Any], view: str = "top") -> int:
 
 def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: bool = True, view: str = "top",
                 planes: Sequence[Any] = (), length_unit: str = "µm", values: Any = None,
-                value_label: str = "") -> PolyCollection:
+                value_label: str = "", discrete: bool = False) -> PolyCollection:
     """Draw the cells on ``ax`` from above (``view="top"``) or from the side (``"side"``),
     coloured by axis orientation in the xy-plane (0–180°), or by ``values`` (one number per
     cell, e.g. :func:`qpcontact.cell_pressure`; colour bar labelled ``value_label``, with its
-    units: :func:`pressure_label`), with the planes seen edge-on."""
+    units: :func:`pressure_label`; with ``discrete``, integers >= 0 such as cell types, one
+    colour each), with the planes seen edge-on."""
     i, j, k = VIEWS[view]
     # Cells farther from the viewer are drawn first: the top layer of a 3D biofilm from above,
     # the front row (small y) from the side.
     order = np.argsort(cells.centers[:, k] if view == "top" else -cells.centers[:, k], kind="stable")
     edges = 0.2
-    if values is None:
+    cmap: str | Colormap
+    if values is not None and discrete:
+        colour = np.asarray(values)
+        if colour.shape != (cells.n,) or colour.dtype.kind not in "iu" or np.any(colour < 0):
+            raise InvalidArgumentError(f"values: expected one integer >= 0 per cell ({cells.n}) to colour by category")
+        count = int(colour.max(initial=0)) + 1
+        cmap, limits, label = category_map(count), (-0.5, count - 0.5), value_label
+        colour = colour.astype(float)
+    elif values is None:
         colour, cmap, limits = np.degrees(np.arctan2(cells.axes[:, 1], cells.axes[:, 0])) % 180.0, "twilight", (0.0, 180.0)
         label = ORIENTATION_LABEL
     else:
@@ -127,8 +179,17 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     if title:
         ax.set_title(title)
     if colorbar and ax.figure is not None:
-        ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8, extend=_beyond(polys))
+        ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8, extend=_beyond(polys), ticks=_ticks(polys, discrete))
     return polys
+
+
+def _ticks(polys: PolyCollection, discrete: bool) -> Any:
+    """The colour bar's ticks: each integer of a discrete colouring (at most 20 shown), else
+    matplotlib's choice."""
+    if not discrete:
+        return None
+    top = int(round(polys.get_clim()[1] + 0.5))
+    return np.arange(0, top, max(1, -(-top // 20)))
 
 
 def _beyond(polys: PolyCollection) -> str:
@@ -138,13 +199,14 @@ def _beyond(polys: PolyCollection) -> str:
 
 
 def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None, *, side_view: bool = False,
-                        planes: Sequence[Any] = (), values: Any = None, value_label: str = "") -> Path:
+                        planes: Sequence[Any] = (), values: Any = None, value_label: str = "",
+                        discrete: bool = False) -> Path:
     """Draw the colony from above (and, with ``side_view``, from the side under it) and save it
     as an image (PNG, SVG, ... by the file suffix), coloured by orientation or by ``values``
-    (:func:`draw_colony`). The figure's height follows the colony's shape (a colony in a channel
-    is a strip)."""
+    (:func:`draw_colony`; :func:`colony_colors` gives the values a run's ``--color`` names). The
+    figure's height follows the colony's shape (a colony in a channel is a strip)."""
     fig = Figure(figsize=(7, 6), dpi=120, layout="constrained")
-    colours = dict(values=values, value_label=value_label)
+    colours = dict(values=values, value_label=value_label, discrete=discrete)
     if not side_view:
         top = fig.subplots()
         draw_colony(top, cells, planes=planes, **colours)
@@ -163,7 +225,7 @@ def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None
         side.set_ylim(bottom, bottom + height)
         top.get_gridspec().set_height_ratios([top.get_ylim()[1] - top.get_ylim()[0], height])
         fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label, shrink=0.8,
-                     extend=_beyond(polys))
+                     extend=_beyond(polys), ticks=_ticks(polys, discrete))
     x_range, y_range = top.get_xlim(), top.get_ylim()
     ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
     fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))

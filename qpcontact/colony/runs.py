@@ -309,11 +309,14 @@ def _toml_value(value: Any) -> str:
         return repr(value)
     if isinstance(value, str):
         return json.dumps(value)  # a TOML basic string: JSON's escapes are TOML's
-    raise InvalidArgumentError(f"TOML: cannot write {value!r} (only numbers, booleans and strings, in tables)")
+    if isinstance(value, (list, tuple)) and not any(isinstance(item, (list, tuple, Mapping)) for item in value):
+        return "[" + ", ".join(map(_toml_value, value)) + "]"
+    raise InvalidArgumentError(f"TOML: cannot write {value!r} (only numbers, booleans, strings and lists of them, in "
+                               "tables)")
 
 
 def write_toml(values: Mapping[str, Any], comment: str = "") -> str:
-    """TOML of numbers, booleans and strings (None as ``"none"``), at the top and in one level
+    """TOML of numbers, booleans, strings and lists of them (None as ``"none"``), at the top and in one level
     of tables (``{"run": {"cells": 500}}`` is ``[run]`` / ``cells = 500``), with a comment on
     top; read back equal by :func:`read_toml` (floats exactly)."""
     head = "".join(f"# {line}\n" for line in comment.splitlines())

@@ -64,8 +64,9 @@ __all__ = ["COLORS", "FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSett
            "stored_values"]
 
 
-#: What ``colony.png`` can colour the cells by (``[output] color``).
-COLORS = ("orientation", "pressure")
+#: What ``colony.png`` can colour the cells by (``[output] color``; the colourings of
+#: :func:`qpcontact.colony.plots.colony_colors`).
+COLORS = ("orientation", "pressure", "cell_type")
 #: The unit of the cells' pressure of a run, and so of ``stall_pressure``: F is the force that moves
 #: 1 µm³ of free cell at 1 µm per doubling time (docs/mechanics.md).
 PRESSURE_UNITS = {2: "F/µm", 3: "F/µm²"}
@@ -86,7 +87,13 @@ class ModelSettings:
         help="mean elongation rate of a cell's cylinder length (exponential): ln 2, the default, doubles it in one "
              "time unit, and a cell growing freely then divides every 1.27 time units (ModelSettings.cycle_time)")
     rate_noise: float = setting(0.1, unit="dimensionless", at_least=0,
-                                help="relative spread (standard deviation) of a newborn's rate around rate")
+                                help="relative spread (standard deviation) of a newborn's rate around rate (or "
+                                     "around her type's rate, type_rates)")
+    type_rates: tuple[float, ...] = setting(
+        (), unit="1/doubling time", above=0,
+        help="per-type growth rates, one per cell type (Colony.cell_types, set by a model hook or a --start "
+             "snapshot; daughters inherit their mother's type): a newborn's mean rate is her type's entry, the "
+             "founder's that of type 0; replaces rate; none: every cell grows at rate")
     axis_noise: float = setting(0.02, unit="rad", at_least=0,
                                 help="standard deviation of the turn of each daughter's axis at division")
     growth_inertia_ratio: float = setting(
@@ -185,8 +192,9 @@ class OutputSettings:
     gif: bool = setting(False, unit="", help="also write an animation colony.gif")
     color: str = setting(
         "orientation", unit="", choices=COLORS,
-        help="what colony.png colours the cells by: orientation (the angle of each cell's axis) or pressure (each "
-             "cell's pressure over the last step, with a colour bar in F/µm in 2D, F/µm² in 3D; docs/mechanics.md)")
+        help="what colony.png colours the cells by: orientation (the angle of each cell's axis), pressure (each "
+             "cell's pressure over the last step, with a colour bar in F/µm in 2D, F/µm² in 3D; docs/mechanics.md) or "
+             "cell_type (one colour per type)")
 
     def __post_init__(self) -> None:
         check_fields(self)
@@ -336,6 +344,8 @@ class Settings:
             return "3D only (cells driven towards the substrate); this run is 2D"
         if s.path == "velocity.damping" and self.velocity.dynamics != "inertial":
             return "used by inertial dynamics only (--velocity-dynamics inertial)"
+        if s.path == "model.rate" and self.model.type_rates:
+            return "replaced by type_rates (a cell's mean rate is that of her type); give one or the other"
         if s.path == "model.stall_pressure" and self.model.pressure_growth == "off":
             return ("used by pressure-dependent growth only (--pressure-growth linear or exponential); this run's "
                     "pressure growth is off")

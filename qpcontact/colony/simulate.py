@@ -152,13 +152,27 @@ class Run:
 
 def founder(settings: Settings) -> Colony:
     """One cell at the origin along x (on the substrate in 3D), half the division length long,
-    of mass = its volume and growth inertia ``growth_inertia_ratio`` × that."""
+    of mass = its volume and growth inertia ``growth_inertia_ratio`` × that, of type 0 growing at
+    ``rate`` (or at ``type_rates[0]`` when given)."""
     model = settings.model
     z = model.radius if settings.run.dimensions == 3 else 0.0
     volume = capsule_volume(model.division_length / 2, model.radius)
     cell = Cells(centers=[[0.0, 0.0, z]], axes=[[1.0, 0.0, 0.0]], lengths=model.division_length / 2,
                  radii=model.radius, masses=volume, growth_inertia=model.growth_inertia_ratio * volume)
-    return Colony.founder(cell, model.rate)
+    return Colony.founder(cell, model.type_rates[0] if model.type_rates else model.rate)
+
+
+def check_types(settings: Settings, colony: Colony) -> None:
+    """Refuse a start whose cells have types that ``model.type_rates`` gives no rate for (they
+    would stop the run at their first division).
+
+    Raises:
+        InvalidArgumentError: naming the largest type and the number of rates.
+    """
+    rates, largest = settings.model.type_rates, int(colony.cell_types.max(initial=0))
+    if rates and largest >= len(rates):
+        raise InvalidArgumentError(f"type_rates: gives {len(rates)} rates (types 0 to {len(rates) - 1}), but the "
+                                   f"colony has cells of type {largest}: give a rate for every type")
 
 
 def grow_with_retries(colony: Colony, dt: float, settings: Settings, **grow_options: Any) -> StepOutcome:
@@ -366,6 +380,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     from tqdm import tqdm  # the progress bar: only when a colony is run
 
     colony, step, rng, extra = initial_state(settings, start)
+    check_types(settings, colony)
     first_step = step
     if hook is None and settings.model.hook:
         hook = load_hook(settings.model.hook)
@@ -406,7 +421,8 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
                     # snapshots of a run whose steps keep 0.01).
                     divided = divide(current, model.division_length if control.division_length is None
                                      else control.division_length, rng, axis_noise=model.axis_noise,
-                                     rate_noise=model.rate_noise, base_rate=model.rate, planar=planar)
+                                     rate_noise=model.rate_noise, base_rate=model.rate, planar=planar,
+                                     type_rates=model.type_rates or None)
                     stepping = divided
                     if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
                         felt = mechanics if current is colony else mechanics.carried_over(colony, current)
@@ -529,6 +545,8 @@ def open_run(args: argparse.Namespace) -> tuple[Settings, Snapshot | None, RunFo
     snapshot = None if path is None else load_snapshot(path)
     in_place = snapshot is not None and is_inside(Path(path), args.out)
     settings = configure(args, snapshot, in_place)
+    if snapshot is not None:
+        check_types(settings, snapshot.colony)
     if settings.output.vtk:
         from .paraview import _meshio
 
@@ -608,10 +626,24 @@ def describe_run(settings: Settings) -> str:
     return label if settings.model.pressure_growth == "off" else f"{label}\n{settings.describe_growth()}"
 
 
+def colony_picture(path: Path, colony: Colony, mechanics: CellMechanics | None, settings: Settings, color: str,
+                   title: str) -> Path:
+    """The picture of a colony as a run draws it (``colony.png``): from above, and from the side
+    too in 3D, with the run's planes, coloured as ``color`` says
+    (:func:`~qpcontact.colony.plots.colony_colors`: orientation, pressure, cell_type, or a
+    ``cell_data`` array's name)."""
+    from .plots import colony_colors, save_colony_picture
+
+    planar = settings.run.dimensions == 2
+    return save_colony_picture(path, colony.cells, title, side_view=not planar, planes=settings.planes(),
+                               **colony_colors(color, colony, mechanics, planar))
+
+
 def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bool, color: str = "orientation") -> None:
-    """``colony.png`` (and a side view in 3D), coloured by the cells' orientation or, with
-    ``color="pressure"``, by their pressure of the last step (:attr:`Run.mechanics`, with a colour
-    bar in its units); ``history.png`` of the whole run (earlier attempts of a resumed run
+    """``colony.png`` (and a side view in 3D, :func:`colony_picture`), coloured by the cells'
+    orientation or, with ``color="pressure"``, by their pressure of the last step
+    (:attr:`Run.mechanics`, with a colour bar in its units), or with ``"cell_type"`` by their
+    type; ``history.png`` of the whole run (earlier attempts of a resumed run
     included); in 2D ``pressure.png``, the radial pressure profile
     (:func:`~qpcontact.colony.plots.plot_pressure_profile`); ``colony.gif`` from this run's
     frames. Titled with what ran (:func:`describe_run`).
@@ -619,7 +651,7 @@ def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bo
     Raises:
         InvalidArgumentError: ``color`` is not one of :data:`COLORS`.
     """
-    from .plots import animate, plot_history, plot_pressure_profile, pressure_label, save_colony_picture
+    from .plots import animate, plot_history, plot_pressure_profile
 
     if color not in COLORS:
         raise InvalidArgumentError(f"color: expected one of {', '.join(COLORS)}, got {color!r}")
@@ -627,11 +659,8 @@ def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bo
     cells, planar = result.colony.cells, settings.run.dimensions == 2
     mechanics = result.mechanics or CellMechanics.zero(cells.n, planar)
     when = f"{cells.n} cells at t = {result.colony.time:.2f} doubling times"
-    by_pressure = color == "pressure"
-    folder.note(save_colony_picture(folder.path / "colony.png", cells, f"{when} ({label})",
-                                    side_view=settings.run.dimensions == 3, planes=settings.planes(),
-                                    values=mechanics.pressure if by_pressure else None,
-                                    value_label=pressure_label(planar) if by_pressure else ""))
+    folder.note(colony_picture(folder.path / "colony.png", result.colony, mechanics, settings, color,
+                               f"{when} ({label})"))
     if planar and cells.n:
         folder.note(plot_pressure_profile(folder.path / "pressure.png", cells, mechanics.pressure,
                                           f"{when}: pressure over the last step\n{label}"))

@@ -136,6 +136,8 @@ def label(value: Any) -> str:
     """A value as it appears in a run's name (file-name safe)."""
     if isinstance(value, float):
         text = f"{value:.6g}"
+    elif isinstance(value, (tuple, list)):  # a list setting (type_rates)
+        text = "_".join(map(label, value)) or "none"
     else:
         text = str(value)
         if "/" in text or os.sep in text:

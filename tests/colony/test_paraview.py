@@ -26,7 +26,7 @@ def expected(snapshot):
     cells = colony.cells
     return {"axis": cells.axes, "length": cells.lengths, "radius": cells.radii, "id": colony.ids,
             "parent_id": colony.parent_ids, "growth_rate": colony.rates, "velocity": cells.velocities,
-            "pressure": mechanics.pressure, "stress": mechanics.stress.reshape(cells.n, 9)}
+            "cell_type": colony.cell_types, "pressure": mechanics.pressure, "stress": mechanics.stress.reshape(cells.n, 9)}
 
 
 def test_a_3d_run_writes_a_vtu_per_snapshot_and_a_time_series(run_3d):
@@ -67,7 +67,7 @@ def read_vtu(path) -> dict:
     assert root.get("type") == "UnstructuredGrid" and root.get("byte_order") == "LittleEndian"
     assert root.get("header_type", "UInt32") == "UInt32"
     compressed = root.get("compressor") == "vtkZLibDataCompressor"
-    dtypes = {"Float64": "<f8", "Float32": "<f4", "Int64": "<i8", "Int32": "<i4", "UInt8": "u1"}
+    dtypes = {"Float64": "<f8", "Float32": "<f4", "Int64": "<i8", "Int32": "<i4", "UInt8": "u1", "Int8": "i1"}
 
     def values(array) -> np.ndarray:
         assert array.get("format") == "binary", array.get("format")
@@ -137,3 +137,31 @@ def test_vtk_without_meshio_is_a_one_line_error(tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "meshio", None)
     assert main(["simulate", "--vtk", "--out", str(tmp_path / "run"), "--quiet"]) == 2
     assert "pip install 'qpcontact[vtk]'" in capsys.readouterr().err
+
+
+def test_cell_types_and_a_models_per_cell_arrays_are_cell_data_of_the_files(tmp_path):
+    """Issue 27: the types and each cell_data array (booleans as 0/1, several numbers per cell
+    as components, a name of a built-in array prefixed) reach ParaView."""
+    from qpcontact.colony.paraview import write_vtu
+
+    run = _small_run(tmp_path)
+    snapshot = load_snapshot(sorted(run.glob("snapshots/step_*.npz"))[-1])
+    colony = snapshot.colony
+    n = colony.cells.n
+    data = {"targetVol": np.linspace(3.0, 5.0, n), "signals": np.arange(2.0 * n).reshape(n, 2),
+            "infected": np.arange(n) % 2 == 0, "length": np.ones(n)}
+    colony = colony.replace(cell_types=np.arange(n) % 3, cell_data=data)
+    grid = read_vtu(write_vtu(run / "typed.vtu", colony, mechanics=snapshot.mechanics))
+    for section, rows in (("PointData", slice(0, n)), ("CellData", slice(n, 2 * n))):
+        np.testing.assert_array_equal(grid[f"{section}/cell_type"][rows], np.arange(n) % 3)
+        np.testing.assert_array_equal(grid[f"{section}/targetVol"][rows], data["targetVol"])
+        np.testing.assert_array_equal(grid[f"{section}/signals"][rows], data["signals"])
+        np.testing.assert_array_equal(grid[f"{section}/infected"][rows], data["infected"].astype(int))
+        np.testing.assert_array_equal(grid[f"{section}/data_length"][rows], data["length"])
+        np.testing.assert_array_equal(grid[f"{section}/length"][rows], colony.cells.lengths)
+
+
+def _small_run(tmp_path):
+    out = tmp_path / "small"
+    assert main(["simulate", "--cells", "5", "--max-dt", "0.1", "--out", str(out), "--quiet"]) == 0
+    return out

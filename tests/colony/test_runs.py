@@ -37,8 +37,11 @@ def assert_identical(a, b) -> None:
     for name in ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta",
                  "growth_momenta"):
         np.testing.assert_array_equal(getattr(a.cells, name), getattr(b.cells, name), err_msg=name)
-    for name in ("ids", "parent_ids", "rates", "owed"):
+    for name in ("ids", "parent_ids", "rates", "owed", "cell_types"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert sorted(a.cell_data) == sorted(b.cell_data)
+    for name in a.cell_data:
+        np.testing.assert_array_equal(a.cell_data[name], b.cell_data[name], err_msg=name)
     assert (a.time, a.next_id) == (b.time, b.next_id)
 
 
@@ -332,3 +335,34 @@ def test_a_run_folder_written_before_the_pressure_columns_is_resumed(tmp_path):
     history = RunFolder(out).read_history()
     assert len(history["step"]) == 13 and np.all(np.isnan(history["mean_pressure"][:10]))
     assert np.all(np.isfinite(history["mean_pressure"][10:]))
+
+
+def typed_hook(colony, step):
+    """A model with its own per-cell state: each cell's age in steps (a daughter starts from her
+    mother's), and at step 20 each cell takes a type by its id, which her daughters inherit."""
+    age = colony.cell_data.get("age", np.zeros(colony.cells.n, dtype=np.int64)) + 1
+    types = colony.ids % 2 if step == 20 else colony.cell_types
+    return colony.replace(cell_types=types, cell_data={"age": age, "tag": np.stack([age, 2 * age], axis=1)})
+
+
+def test_a_run_resumed_from_a_snapshot_keeps_the_cell_types_and_the_models_per_cell_arrays(tmp_path):
+    """Issue 27: before, a hook's own per-cell dictionary was lost on resume; now its state lives
+    in the colony's cell_data and cell_types, which the snapshots save: the resumed run follows
+    the uninterrupted one bit for bit, and the per-type growth rates act on the newborns."""
+    settings = Settings().updated({"cells": 10**6, "max_steps": 90, "rate_noise": 0.0, "type_rates": [0.7, 0.35]})
+    full = run_colony(settings, progress=False, hook=typed_hook)
+    part = run_colony(settings.updated({"max_steps": 55}), progress=False, hook=typed_hook,
+                      folder=RunFolder.create(tmp_path / "part"))
+    snapshot = load_snapshot(tmp_path / "part" / "snapshots" / "step_000055.npz")
+    assert_identical(snapshot.colony, part.colony)
+    assert Settings.from_stored(snapshot.settings, "snapshot").model.type_rates == (0.7, 0.35)
+    resumed = run_colony(settings, start=snapshot, progress=False, hook=typed_hook)
+    assert_identical(resumed.colony, full.colony)
+    colony = full.colony
+    assert set(colony.cell_types) == {0, 1} and colony.cell_data["age"].max() == 90
+    # Per-type rates: a cell born after the types were set grows at her type's rate (no noise);
+    # the founder and her descendants before that grew at type 0's.
+    born_after = colony.ids > part.colony.ids.max()  # born after step 55, long after step 20
+    assert born_after.any() and (colony.cell_types[born_after] == 1).any()
+    np.testing.assert_array_equal(colony.rates[born_after], np.where(colony.cell_types[born_after] == 1, 0.35, 0.7))
+    assert np.all(np.isin(colony.rates, [0.7, 0.35]))

@@ -117,7 +117,7 @@ def test_the_api_reference_shows_the_one_description():
                                          "'quadratic'"),
     (["--pressure-growth", "linear", "--stall-pressure", "0"], "argument --stall-pressure: expected a number > 0, got 0.0"),
     (["--pressure-growth", "linear", "--stall-pressure", "inf"], "argument --stall-pressure: expected a finite number"),
-    (["--color", "red"], "argument --color: expected one of orientation, pressure, got 'red'"),
+    (["--color", "red"], "argument --color: expected one of orientation, pressure, cell_type, got 'red'"),
 ])
 def test_a_flag_that_does_not_apply_or_cannot_be_used_is_refused_before_the_run(argv, message, tmp_path, capsys,
                                                                                 monkeypatch):
@@ -236,9 +236,9 @@ def test_the_pressure_settings_are_described_once_with_their_units():
         "model.stall_pressure", "--stall-pressure", 100.0, "> 0")
     assert "F/µm in 2D, F/µm² in 3D" in stall.description.unit
     assert (color.path, color.flag, color.default, color.description.choices) == (
-        "output.color", "--color", "orientation", ("orientation", "pressure"))
+        "output.color", "--color", "orientation", ("orientation", "pressure", "cell_type"))
     help_text = simulate_parser().format_help()
-    assert "--pressure-growth {off,linear,exponential}" in help_text and "--color {orientation,pressure}" in help_text
+    assert "--pressure-growth {off,linear,exponential}" in help_text and "--color {orientation,pressure,cell_type}" in help_text
     settings = Settings().updated({"pressure_growth": "exponential", "stall_pressure": 20})
     assert settings.describe_growth() == "pressure growth exponential, stall pressure 20 F/µm"
     assert settings.updated({"dimensions": 3}).describe_growth().endswith("F/µm²")

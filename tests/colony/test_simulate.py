@@ -308,5 +308,81 @@ def test_the_history_has_the_mean_and_largest_pressure_and_pictures_colour_by_pr
     colorbar = saved[0].axes[-1]
     assert "2D pressure [F/µm]" in colorbar.get_ylabel()
     assert saved[1].axes[0].get_xlabel() == "distance from the colony's centre r [µm]"
-    with pytest.raises(InvalidArgumentError, match="color: expected one of orientation, pressure"):
+    with pytest.raises(InvalidArgumentError, match="color: expected one of orientation, pressure, cell_type"):
         draw_pictures(folder, settings, run, gif=False, color="red")
+
+
+# ------------------------------------------------------------------------------------------
+# Issue 27: per-type growth rates, colours by type
+# ------------------------------------------------------------------------------------------
+def test_type_rates_are_a_model_setting_of_flags_toml_and_snapshots(tmp_path, capsys):
+    from qpcontact.cli import main
+    from qpcontact.colony.runs import read_toml
+    from qpcontact.colony.snapshots import load_snapshot
+
+    out = tmp_path / "run"
+    assert main(["simulate", "--cells", "4", "--type-rates", "0.5,0.25", "--rate-noise", "0", "--out", str(out),
+                 "--quiet"]) == 0
+    assert read_toml(out / "config.toml")["model"]["type_rates"] == [0.5, 0.25]
+    assert "rate" not in read_toml(out / "config.toml")["model"]  # replaced by type_rates
+    last = load_snapshot(sorted((out / "snapshots").glob("step_*.npz"))[-1])
+    np.testing.assert_array_equal(last.colony.rates, 0.5)  # all of type 0: the founder's type
+    assert last.settings["model"]["type_rates"] == [0.5, 0.25]
+    config = tmp_path / "run.toml"
+    config.write_text("[model]\ntype_rates = [0.5, 0.25]\n")
+    assert simulate.configure(simulate_args(["--config", str(config)]), None, False).model.type_rates == (0.5, 0.25)
+    capsys.readouterr()
+    for argv, message in [
+        (["--type-rates", "0.5,-1"], "--type-rates: expected a list of numbers, each a number > 0, got -1.0"),
+        (["--type-rates", "0.5,x"], "cannot read '0.5,x' as numbers separated by commas"),
+        (["--type-rates", "0.5", "--rate", "0.3"], "--rate: replaced by type_rates"),
+    ]:
+        assert main(["simulate", *argv, "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+    config.write_text("[model]\ntype_rates = [0.5, 0.0]\n")
+    assert main(["simulate", "--config", str(config), "--out", str(tmp_path / "bad"), "--quiet"]) == 2
+    assert "[model] type_rates: expected a list of numbers, each a number > 0, got 0.0" in capsys.readouterr().err
+
+
+def test_a_start_with_types_that_type_rates_has_no_rate_for_is_refused_up_front(tmp_path, capsys):
+    from qpcontact.cli import main
+    from qpcontact.colony.snapshots import save_colony
+
+    colony = simulate.founder(simulate.Settings()).replace(cell_types=[2])
+    start = save_colony(tmp_path / "typed.npz", colony, 0)
+    assert main(["simulate", "--start", str(start), "--type-rates", "0.5,0.25", "--out", str(tmp_path / "run"),
+                 "--quiet"]) == 2
+    assert "type_rates: gives 2 rates (types 0 to 1), but the colony has cells of type 2" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
+    with pytest.raises(InvalidArgumentError, match="has cells of type 2"):
+        simulate.run_colony(simulate.Settings().updated({"type_rates": [0.5]}), start=colony, progress=False)
+
+
+def test_colony_png_can_be_coloured_by_cell_type(tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+
+    from qpcontact.colony.runs import RunFolder
+    from qpcontact.colony.simulate import Settings, draw_pictures, run_colony
+
+    settings = Settings().updated({"cells": 6})
+    run = run_colony(settings, progress=False, hook=lambda colony, step: colony.replace(cell_types=colony.ids % 3))
+    saved = []
+    monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
+    draw_pictures(RunFolder.create(tmp_path / "run"), settings, run, gif=False, color="cell_type")
+    top, colorbar = saved[0].axes[0], saved[0].axes[-1]
+    assert colorbar.get_ylabel() == "cell type"
+    assert [t.get_text() for t in colorbar.get_yticklabels()] == ["0", "1", "2"]
+    polys = top.collections[0]
+    faces = polys.to_rgba(polys.get_array())
+    order = np.argsort(run.colony.cells.centers[:, 2], kind="stable")  # drawn farthest first
+    types = run.colony.cell_types[order]
+    for a in range(len(types)):  # one colour per type, different types different colours
+        for b in range(len(types)):
+            assert np.allclose(faces[a], faces[b]) == (types[a] == types[b])
+
+
+def simulate_args(argv):
+    from qpcontact.cli import build_parser
+
+    return build_parser("simulate").parse_args(["simulate", *argv])

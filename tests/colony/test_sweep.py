@@ -105,7 +105,7 @@ def test_the_grid_from_a_configuration_file_with_flags_overriding_it(tmp_path):
     (["--vary", "pressure_growth=off,quadratic"],
      "run pressure_growth-quadratic__seed-1: pressure_growth: expected one of off, linear, exponential, got "
      "'quadratic'"),
-    (["--vary", "color=orientation,red"], "run color-red__seed-1: color: expected one of orientation, pressure, got 'red'"),
+    (["--vary", "color=orientation,red"], "run color-red__seed-1: color: expected one of orientation, pressure, cell_type, got 'red'"),
 ])
 def test_a_bad_setting_is_rejected_before_any_task_starts(argv, message, tmp_path, capsys, monkeypatch):
     def no_cluster(*args, **kwargs):
