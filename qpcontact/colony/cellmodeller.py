@@ -43,10 +43,12 @@ are left out too, each named in :attr:`CellModellerState.left_out`, never silent
 A cell's mass is its volume (qpcontact's convention, :func:`qpcontact.colony.volumes`), its
 growth inertia ``growth_inertia_ratio`` times that; the momenta are zero and no length is owed.
 The snapshot's settings (:attr:`CellModellerState.settings`) are what the state fixes: the
-dimensions (2 when every cell lies in the plane z = 0 along it, else 3), the radius and the
-rate where all cells share one, and ``rate_noise`` 0 (CellModeller's daughters inherit their
-mother's ``growthRate``), so that ``qpcontact simulate --start FILE`` continues the colony as
-CellModeller grew it; everything else is qpcontact's default or given on that command line.
+dimensions (2 when every cell lies in the plane z = 0 along it, else 3), the radius where all
+cells share one, the rate where all share one or else ``type_rates`` where the cells of each
+type share one, and ``rate_noise`` 0 (CellModeller's daughters inherit their mother's
+``growthRate``), so that ``qpcontact simulate --start FILE`` continues the colony as CellModeller
+grew it; what the state does not fix is named in :attr:`CellModellerState.notes`, and the rest
+(the division length, ...) is qpcontact's default or given on that command line.
 
 **Safety.** Loading a pickle can run any code its author put in it. :func:`load_pickle` builds
 only what a CellModeller state holds — ``CellState`` as a plain record of attributes
@@ -231,12 +233,15 @@ class CellModellerState(Snapshot):
         dt: CellModeller's time step [its time unit].
         model: the model's name (``moduleName``).
         left_out: per-cell attributes not imported, by name, with the reason (module docstring).
+        notes: what the stored settings could not take from the state (cells that share no
+            growth rate, nor one per type; radii that differ).
     """
 
     cellmodeller_step: int = 0
     dt: float = math.nan
     model: str = ""
     left_out: dict[str, str] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
 
     def save(self, path: str | Path) -> Path:
         """Write the snapshot (:func:`qpcontact.colony.save_colony`, no random state: a run
@@ -290,13 +295,30 @@ def read_cellmodeller(path: str | Path, *, step: int | None = None, dt: float | 
             cell_data=cell_data)
     except QPContactError as exc:
         raise InvalidSnapshotError(f"{source}: {exc}") from None
-    planar = bool(np.all(centers[:, 2] == 0.0) and np.all(axes[:, 2] == 0.0))
-    settings: dict[str, Any] = {"run": {"dimensions": 2 if planar else 3}, "model": {"rate_noise": 0.0}}
-    for key, values in (("radius", colony.cells.radii), ("rate", colony.rates)):
-        if values.size and np.all(values == values[0]):
-            settings["model"][key] = float(values[0])
+    settings, notes = _settings(colony)
     return CellModellerState(colony, step_number + 1, settings, path=source, cellmodeller_step=step_number, dt=dt,
-                             model=str(data.get("moduleName", "")), left_out={**DERIVED, **left_out})
+                             model=str(data.get("moduleName", "")), left_out={**DERIVED, **left_out}, notes=notes)
+
+
+def _settings(colony: Colony) -> tuple[dict[str, Any], list[str]]:
+    """The settings the state fixes (module docstring), and what it could not fix."""
+    cells, rates, types = colony.cells, colony.rates, colony.cell_types
+    planar = bool(np.all(cells.centers[:, 2] == 0.0) and np.all(cells.axes[:, 2] == 0.0))
+    model: dict[str, Any] = {"rate_noise": 0.0}
+    notes = []
+    if np.all(cells.radii == cells.radii[0]):
+        model["radius"] = float(cells.radii[0])
+    else:
+        notes.append("the cells' radii differ: newborn cells keep their mother's, [model] radius is not used")
+    per_type = [np.unique(rates[types == k]) for k in range(int(types.max()) + 1)]
+    if np.all(rates == rates[0]):
+        model["rate"] = float(rates[0])
+    elif all(r.size == 1 and r[0] > 0 for r in per_type):  # one rate per type: CellModeller's per-type models
+        model["type_rates"] = [float(r[0]) for r in per_type]
+    else:
+        notes.append("the cells share no growth rate, nor one per type: newborn cells grow at [model] rate "
+                     "(--rate, or --type-rates one per type)")
+    return {"run": {"dimensions": 2 if planar else 3}, "model": model}, notes
 
 
 def _contents(path: Path, data: Any) -> tuple[dict[int, CellState], int, dict[int, int]]:
@@ -414,6 +436,10 @@ def _own_data(cells: list[CellState]) -> tuple[dict[str, np.ndarray], dict[str, 
 OUTPUTS_HELP = "the snapshot to write (.npz appended if missing), for qpcontact simulate --start"
 
 
+def _show(value: Any) -> str:
+    return ", ".join(f"{v:g}" for v in value) if isinstance(value, list) else f"{value:g}"
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = ("Read a CellModeller state (a step-NNNNN.pickle, or a run folder of them: its last step, "
                           "or --step) into a qpcontact snapshot that 'qpcontact simulate --start FILE' continues: "
@@ -451,8 +477,10 @@ def run_command(args: argparse.Namespace) -> int:
           f"{colony.cells.n} cells (types {types}) at t = {colony.time:.6g}, snapshot step {state.step}")
     print(f"  per-cell data kept: {', '.join(colony.cell_data) or 'none'}"
           + (f"; left out (not numbers per cell): {', '.join(own)}" if own else ""))
-    print("  settings stored: " + "; ".join(f"{table}.{key} = {value:g}" for table, values in (state.settings or {}).items()
-                                            for key, value in values.items()))
+    print("  settings stored: " + "; ".join(f"{table}.{key} = {_show(value)}" for table, values in
+                                            (state.settings or {}).items() for key, value in values.items()))
+    for note in state.notes:
+        print(f"  note: {note}")
     print(f"wrote {out}\ncontinue it with: qpcontact simulate --start {out} --out FOLDER")
     return 0
 

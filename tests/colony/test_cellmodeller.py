@@ -284,9 +284,27 @@ def test_types_3d_states_and_values_that_are_not_numbers(tmp_path):
     np.testing.assert_array_equal(state.colony.cell_types, [1, 0])
     np.testing.assert_array_equal(state.colony.parent_ids, [1, 1])
     assert state.colony.next_id == 5 and state.settings["run"]["dimensions"] == 3
-    assert "rate" not in state.settings["model"]  # the cells do not share one
+    assert state.settings["model"] == {"rate_noise": 0.0, "radius": 0.5, "type_rates": [1.0, 0.5]} and not state.notes
     assert state.left_out["label"].startswith("not a number") and state.left_out["signal"] == "only some cells have it"
     assert state.colony.cell_data == {}
+    cells[1]["cellType"] = 2  # no cell of type 1: no rate for it
+    state = read_cellmodeller(write_state(tmp_path / "step-00010.pickle", cells, 10, {3: 1, 4: 1}))
+    assert set(state.settings["model"]) == {"rate_noise", "radius"} and "share no growth rate" in state.notes[0]
+
+
+def test_per_type_rates_are_continued_by_simulate(tmp_path, capsys):
+    """A 2D pair of types growing at 1.0 and 0.5: the snapshot's type_rates give each newborn
+    her type's rate (before, every newborn grew at [model] rate)."""
+    cells = [dict(id=1, pos=[0, 0, 0], cellType=0, growthRate=1.0, time=0.5),
+             dict(id=2, pos=[0, 1.0, 0], cellType=1, growthRate=0.5, time=0.5)]
+    write_state(tmp_path / "step-00010.pickle", cells, 10)
+    assert main(["import-cellmodeller", str(tmp_path / "step-00010.pickle"), "--out", str(tmp_path / "two.npz")]) == 0
+    assert "model.type_rates = 1, 0.5" in capsys.readouterr().out
+    run = tmp_path / "run"
+    assert main(["simulate", "--start", str(tmp_path / "two.npz"), "--cells", "6", "--out", str(run), "--quiet"]) == 0
+    colony = load_snapshot(sorted((run / "snapshots").glob("step_*.npz"))[-1]).colony
+    assert colony.cells.n >= 6
+    np.testing.assert_allclose(colony.rates, np.where(colony.cell_types == 0, 1.0, 0.5))
 
 
 @pytest.mark.parametrize("change, message", [
