@@ -8,11 +8,13 @@ without growth, and prints per step the largest overlap and how far the cells mo
 (tip travel from turning and centre travel, fractions of the diameter).
 
     python examples/foreign_state.py                          # a packed layer made to overlap
-    python examples/foreign_state.py --state cellmodeller_10000.npz --steps 5
+    python examples/foreign_state.py --state tests/data/cellmodeller/ex1_simpleGrowth_seed1 --steps 3
 
-``--state`` is an ``.npz`` with ``centers`` (N, 3), ``axes`` (N, 3), ``lengths`` (N,) between the
-cap centres and ``radii`` (N,) [µm], as ``shared/peer/run_cellmodeller.py`` exports them. Exit
-status 1 if the largest overlap ever grew or a cell turned by more than the turn limit.
+``--state`` is a CellModeller state — one of its ``step-NNNNN.pickle`` files or a run folder of
+them (its last step), read with :func:`qpcontact.read_cellmodeller`; the 10⁴-cell states of
+``benchmarks/cellmodeller/grow_cellmodeller.py`` are such pickles — or a qpcontact snapshot
+(``.npz``, e.g. one that ``qpcontact import-cellmodeller`` wrote). Exit status 1 if the largest
+overlap ever grew or a cell turned by more than the turn limit.
 """
 
 from __future__ import annotations
@@ -41,17 +43,15 @@ def packed_layer(rows: int, overlap: float, seed: int = 1) -> qc.Cells:
 
 
 def load_state(path: Path) -> qc.Cells:
-    """Cells of an exported state (masses: volume in µm³; no growth)."""
-    with np.load(path) as data:
-        lengths, radii = np.asarray(data["lengths"], float), np.asarray(data["radii"], float)
-        volumes = np.pi * radii**2 * (lengths + 4.0 * radii / 3.0)
-        return qc.Cells(centers=data["centers"], axes=data["axes"], lengths=lengths, radii=radii, masses=volumes,
-                        growth_inertia=np.inf, normalize_axes=True)
+    """The cells of a CellModeller state or a qpcontact snapshot (masses: volume in µm³), not
+    growing."""
+    colony = qc.load_colony(path)[0] if path.suffix == ".npz" else qc.read_cellmodeller(path).colony
+    return colony.cells.replace(growth_inertia=np.inf)
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--state", type=Path, help="an exported state (.npz); default: a packed layer")
+    parser.add_argument("--state", type=Path, help="a CellModeller pickle or run folder, or a qpcontact snapshot (.npz); default: a packed layer")
     parser.add_argument("--rows", type=int, default=20, help="rows (and columns) of the packed layer (default: 20)")
     parser.add_argument("--overlap", type=float, default=0.15,
                         help="overlap of the packed layer's rows [fraction of the diameter] (default: 0.15)")

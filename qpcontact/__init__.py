@@ -7,7 +7,7 @@ the plain linear solve, MPRGP, every qpsolvers backend) → :mod:`~qpcontact.res
 (:func:`resolve`, one call per step, every answer checked → :class:`Result`) →
 :mod:`~qpcontact.colony` (the position-level step :func:`position_step` — what ``qpcontact simulate``
 runs — and :func:`grow_position`; the velocity-level :func:`step` and :func:`grow`; :class:`Colony`,
-snapshots; the stress and
+snapshots, CellModeller's states (:func:`read_cellmodeller`); the stress and
 pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`; tables
 of a snapshot's cells and of a run's steps as pandas DataFrames: :func:`colony_frame`,
 :func:`run_frame`). The studies
@@ -35,6 +35,7 @@ from .colony import (
     load_colony,
     position_step,
     pressure_growth_rate,
+    read_cellmodeller,
     run_frame,
     save_colony,
     step,
@@ -62,6 +63,6 @@ __all__ = [
     "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
     "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
     "colony_frame", "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
-    "load_colony", "plane_contacts", "pressure_growth_rate", "reference_solution", "resolve", "run_frame", "save_colony", "solve_system", "step",
+    "load_colony", "plane_contacts", "pressure_growth_rate", "read_cellmodeller", "reference_solution", "resolve", "run_frame", "save_colony", "solve_system", "step",
     "substrate",
 ]

@@ -29,6 +29,8 @@ COMMANDS = {
     "sweep": ("qpcontact.colony.sweep", "replicates and parameter sweeps of colony runs, as tasks on Dask"),
     "table": ("qpcontact.colony.tables", "a snapshot's cells, or a run's time series, as a CSV or Parquet table"),
     "plot": ("qpcontact.colony.picture", "draw a saved snapshot again as its run drew colony.png"),
+    "import-cellmodeller": ("qpcontact.colony.cellmodeller", "read a CellModeller state (its pickles) into a snapshot "
+                            "that simulate --start continues"),
 }
 
 

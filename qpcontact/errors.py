@@ -73,3 +73,10 @@ class OutputFolderError(QPContactError, OSError):
 class ModelHookError(QPContactError, RuntimeError):
     """A colony run's model hook (:mod:`qpcontact.colony.hooks`) raised, or returned something it
     cannot use; the hook's own exception, if any, is the ``__cause__``."""
+
+
+class RefusedPickleError(InvalidSnapshotError):
+    """A pickle was refused: it asks for a class or function that the state it should hold does
+    not have, which is then neither built nor called (loading a pickle can run any code its
+    author put in it; :func:`qpcontact.colony.cellmodeller.load_pickle` builds only what a
+    CellModeller state holds). The message names what it asked for."""

@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ROOT / "benchmarks"
 
@@ -18,3 +20,63 @@ def test_the_before_after_timing_runs_against_a_checkout():
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert "| 2D | 200 | detect |" in done.stdout and "| True |" in done.stdout
+
+
+def _cellmodeller_harness():
+    """benchmarks/cellmodeller/grow_cellmodeller.py as a module (CellModeller itself is imported
+    only when it runs, so its helpers are tested here without it)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("grow_cellmodeller", BENCHMARKS / "cellmodeller" / "grow_cellmodeller.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_cellmodeller_harness_writes_the_step_log_bench_grown_reads(tmp_path):
+    """Issue 28: the side-by-side harness is the project's own (before, a script outside the
+    repository); its step log is what ``bench-grown --peer-log`` sums."""
+    import argparse
+
+    import numpy as np
+
+    from qpcontact.studies.grown import peer_times
+
+    harness = _cellmodeller_harness()
+
+    class Physics:  # CellModeller's CLBacterium, as far as the timers see it
+        def step(self, dt):
+            self.CGSSolve(dt, 10.0)
+            return True
+
+        def CGSSolve(self, dt, alpha, substep=False):
+            return 7, 0.004
+
+    physics = Physics()
+    timers = harness.Timers(physics)
+    assert physics.step(0.025) is True and timers.solves[0][:2] == (7, 0.004) and timers.physics_seconds > 0
+    log = [harness.step_row(1, 1, 1, 0.5, timers, 0), harness.step_row(2, 2, 1, 0.25, timers, 1)]
+    two = dict(centers=np.array([[0.0, 0, 0], [0.0, 0.9, 0]]), axes=np.array([[1.0, 0, 0], [1.0, 0, 0]]),
+               lengths=np.array([2.0, 2.0]), radii=np.array([0.5, 0.5]))
+    log[1].update(harness.overlaps(two))
+    assert log[1]["max_overlap"] == pytest.approx(0.1) and log[1]["overlapping_contacts"] == 2  # side by side: two contact points
+    harness.write_log(tmp_path / "steps.json", argparse.Namespace(out=tmp_path, seed=1), log)
+    peer = peer_times(tmp_path / "steps.json", [1, 2])
+    assert peer["steps"] == 2 and peer["reached"][2] == dict(seconds=0.75, step=2, cells=2, max_overlap=pytest.approx(0.1))
+
+
+def test_the_cellmodeller_patch_guards_the_renderer(tmp_path):
+    """headless-ex1.patch applies (git apply) to the lines it says CellModeller has and puts the
+    renderer under ``if sim.is_gui:``."""
+    patch = BENCHMARKS / "cellmodeller" / "headless-ex1.patch"
+    hunk = patch.read_text().split("\n@@ ", 1)[1].splitlines()[1:]
+    before = [line[1:] for line in hunk if line[:1] in (" ", "-")]
+    target = tmp_path / "Examples" / "ex1_simpleGrowth.py"
+    target.parent.mkdir()
+    target.write_text("\n" * 19 + "\n".join(before) + "\n")
+    done = subprocess.run(["git", "apply", str(patch)], cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    text = target.read_text()
+    assert "    if sim.is_gui:" in text and "\n        from CellModeller.GUI import Renderers" in text
+    assert "#if sim.is_gui" not in text

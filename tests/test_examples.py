@@ -46,6 +46,16 @@ def test_a_foreign_state_with_overlaps_of_0_15_is_cleared_without_spinning(capsy
     assert max(float(row[2]) for row in rows) <= PositionSettings().turn_limit
 
 
+def test_a_cellmodeller_state_is_cleared_from_its_pickles(capsys):
+    """``--state`` takes CellModeller's run folder (read by qc.read_cellmodeller), as the
+    10⁴-cell states of benchmarks/cellmodeller/ are; before, a file outside the repository."""
+    assert run_example("foreign_state", "--state", str(ROOT / "tests/data/cellmodeller/ex1_simpleGrowth_seed1"),
+                       "--steps", "2") == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].startswith("64 cells, 2D, largest overlap 0.02")  # CellModeller leaves 0.02 diameters at 64 cells
+    assert lines[-1] == "largest overlap never grew, no cell turned beyond the limit"
+
+
 def test_a_colony_between_walls_stays_between_them(tmp_path, capsys):
     """At its default 60 cells: until issue 19 a step's Clarabel answer ended "AlmostSolved" with
     residuals inside what the tolerance promises, was refused for its status word, and the

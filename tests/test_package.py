@@ -169,13 +169,10 @@ def _named_paths(text: str) -> set[str]:
 
 
 def _exists(path: str) -> bool:
-    # shared/ (the design card, the peer's tools) lies beside the developers' checkout, outside the
-    # repository: checked where it is there, taken as given on a clone without it (a CI machine).
-    if path.startswith(("shared/", "../shared/")):
-        shared = ROOT.parent / "shared"
-        if not shared.is_dir():
-            return True
-        return (shared / path.split("shared/", 1)[1]).exists()
+    """Whether the repository has ``path``. A path outside it (``../``, or ``shared/`` — a folder
+    beside some checkouts, none of a clone) never counts: the repository stands on its own."""
+    if path.startswith(("../", "shared/")):
+        return False
     return (ROOT / path).exists() or ("*" in path and any(ROOT.glob(path)))
 
 
@@ -207,11 +204,46 @@ def test_every_path_and_relative_link_a_document_names_exists(document):
 
 
 def test_the_path_check_finds_what_is_missing(tmp_path):
-    """(Guards the test above: it would catch a stale path, a stale link and a stale anchor.)"""
+    """(Guards the test above: it would catch a stale path, a stale link and a stale anchor, and a
+    path outside the repository, whether or not it exists on this machine.)"""
     text = ("see `docs/img/gone.png`, qpcontact/gone.py, `out/x.csv` and [a](docs/model-notes.md#nowhere), "
             "[b](docs/nothing.md)")
     assert {"docs/img/gone.png", "qpcontact/gone.py", "out/x.csv"} <= _named_paths(text)
     assert not _exists("docs/img/gone.png") and _exists("docs/img/colony_2d.png")
+    beside = "../sha" + "red/peer/README.md"  # (spelled so that this file does not name it)
+    assert _named_paths(f"run `{beside}` or {beside[3:]}") == {beside, beside[3:]}
+    assert not _exists(beside) and not _exists(beside[3:]) and not _exists("../README.md")
+
+
+#: What no file of the repository may name: paths into the folder "shared" beside the developers'
+#: checkout (relative to the checkout or to its parent) or into this machine's "/work" folders. Recorded outputs
+#: (docs/data) and binary files are not read.
+_OUTSIDE = re.compile(r"(?<![\w/.-])(?:(?:\.\./)?shared/[\w.-]+|/work/[\w.-]+)")
+
+
+def _repository_texts() -> list[Path]:
+    listed = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=ROOT, capture_output=True, text=True)
+    names = listed.stdout.split() if listed.returncode == 0 else [
+        str(p.relative_to(ROOT)) for p in ROOT.rglob("*") if ".git" not in p.parts]
+    keep = (".py", ".md", ".toml", ".sh", ".patch", ".txt", ".cfg", ".yml", ".yaml")
+    return [ROOT / n for n in names if (n.endswith(keep) or n == ".ci/run") and not n.startswith("docs/data/")
+            and (ROOT / n).is_file()]
+
+
+def test_no_file_names_a_path_outside_the_repository():
+    """Issue 28: the documents and the tools named the design page and the peer's benchmark in
+    ``shared/`` beside the checkout, which a clone does not have; and the document path test took
+    such paths as given where that folder was missing."""
+    found = [f"{p.relative_to(ROOT)}:{n}: {m}" for p in _repository_texts()
+             for n, line in enumerate(p.read_text(errors="replace").splitlines(), 1) for m in _OUTSIDE.findall(line)]
+    assert not found, found
+
+
+def test_the_outside_path_check_finds_them():
+    text = "see ../sha" + "red/peer/x.py, sha" + "red/design/model.md and /wo" + "rk/main/qpcontact/bench.py"
+    assert len(_OUTSIDE.findall(text)) == 3
+    assert not _OUTSIDE.findall("qpcontact/colony/x.py, --out /shared/me/sweep-1, docs/../README.md, a/b")
+    assert any(p.name == "test_package.py" for p in _repository_texts())
     assert _slug("The position-level step (issue 12)") == "the-position-level-step-issue-12"
 
 

@@ -25,6 +25,8 @@
   (:class:`RunFolder`), history appends, atomic snapshots, Ctrl-C, resuming, ``config.toml``;
 - :mod:`.hooks`: model hooks, the user's per-step function (:class:`StepControl`);
 - :mod:`.paraview`: ParaView files (``.vtu`` per snapshot, ``.pvd`` series; needs meshio);
+- :mod:`.cellmodeller`: CellModeller's saved states (its pickles, read by an unpickler that
+  builds nothing else) as snapshots: :func:`read_cellmodeller`, ``qpcontact import-cellmodeller``;
 - :mod:`.plots`: pictures of a run (matplotlib; imported only when drawing:
   ``from qpcontact.colony import plots``); :mod:`.picture`: ``qpcontact plot``, a snapshot
   drawn again;
@@ -36,6 +38,7 @@ Imports the geometry, assembly, solvers and resolve wings only.
 """
 
 from ..geometry.motion import rotate
+from .cellmodeller import CellModellerState, read_cellmodeller
 from .growth import (
     Colony,
     daughters_share,
@@ -68,10 +71,10 @@ from .step import StepResult, advance, largest_overlap, overlap_fractions, step
 from .tables import colony_columns, colony_frame, run_frame
 
 __all__ = [
-    "CellMechanics", "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
+    "CellMechanics", "CellModellerState", "CellMotion", "Colony", "ContactImpulses", "ModelSettings", "OutputSettings", "PositionSettings",
     "PositionStepResult", "PressureGrowth", "Run", "RunFolder", "RunSettings", "Settings", "Snapshot", "VelocitySettings",
     "cell_forces", "cell_pressure", "cell_stress", "fit_parabola", "pressure_growth_rate", "radial_profile",
-    "StepControl", "StepOutcome", "StepResult", "advance", "colony_columns", "colony_frame", "daughters_share", "divide",
+    "read_cellmodeller", "StepControl", "StepOutcome", "StepResult", "advance", "colony_columns", "colony_frame", "daughters_share", "divide",
     "expansion_time_step", "grow",
     "grow_position",
     "growth_drive", "growth_step", "growth_time_step", "largest_overlap", "load_colony", "load_snapshot", "move",

@@ -16,9 +16,10 @@ workload, every step kind side by side in one run on this machine:
    in ``--cache-dir``, reused by later benchmarks), one step with each step kind and solver
    (median of ``--repeats`` steps from the same state): the position step with each of
    ``--position-solvers``, the velocity step with Clarabel at 10⁻⁶ and OSQP at 10⁻³.
-3. **The peer**: CellModeller's time to each size from the step log of its own benchmark script
-   (``--peer-log``, the JSON written by ``run_cellmodeller.py``; run it in the same session, see
-   docs/performance.md), with its overlaps where the log has them.
+3. **The peer**: CellModeller's time to each size from the step log of the project's harness
+   (``--peer-log``, the ``steps.json`` written by ``benchmarks/cellmodeller/grow_cellmodeller.py``;
+   run it in the same session, see benchmarks/cellmodeller/README.md), with its overlaps where the
+   log has them.
 
 Writes ``grown.md`` (the tables, with the date, machine and load), ``grown.json`` (every number)
 and ``grown.png`` (cells against wall time) in ``--out``.
@@ -189,7 +190,8 @@ def run_step(state: Path, dimensions: int, label: str, step: str, changes: dict[
 
 def peer_times(log_path: Path, sizes: list[int]) -> dict[str, Any]:
     """CellModeller's wall time (sum of its steps' ``t_sim``) to each size, and its overlaps,
-    from the step log of ``run_cellmodeller.py``."""
+    from a step log (``{"log": [{"step", "n", "t_sim", "max_overlap"?}, ...]}``, as
+    ``benchmarks/cellmodeller/grow_cellmodeller.py`` writes it)."""
     log = json.loads(Path(log_path).read_text())["log"]
     total, reached = 0.0, {}
     worst = 0.0
@@ -295,7 +297,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="wall-time limit of one growth run [s]: the run stops there and reports the sizes it "
                         "reached (default: 7200)")
     parser.add_argument("--peer-log", type=Path, metavar="FILE",
-                        help="CellModeller's step log (JSON of run_cellmodeller.py) to put in the table")
+                        help="CellModeller's step log (steps.json of benchmarks/cellmodeller/grow_cellmodeller.py) to put "
+                        "in the table")
     parser.add_argument("--cache-dir", type=Path, metavar="FOLDER",
                         default=Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "qpcontact-grown",
                         help="where grown states are saved and reused (default: ~/.cache/qpcontact-grown)")
