@@ -100,10 +100,11 @@ class PositionSettings:
         0.05, unit="fraction of the pair's diameter", above=0,
         help="overlap present at the start of the step is removed by at most this much per step")
     aim: float = setting(
-        0.02, unit="fraction of the pair's diameter", at_least=0,
+        0.03, unit="fraction of the pair's diameter", at_least=0,
         help="the linearizations aim at this gap beyond each target, so that the error of one linearization "
-             "(turning, and contacts sliding over the caps, are not linear) falls within the tolerance: on grown "
-             "colonies of 5,000 cells (2D) and 2,000 (3D), one linearization per step where 0.01 needed two or "
+             "(turning, and contacts sliding over the caps, are not linear) falls within the tolerance: on a "
+             "grown 3D biofilm of 5,000 cells one linearization per step where 0.02 needed two to four (the "
+             "first left 0.012-0.015 of a diameter), and 0.02 one per step in 2D where 0.01 needed two or "
              "three (docs/model-notes.md); contacts then rest at up to this gap, as if the cells were this much "
              "thicker")
     allow_shrinking: bool = setting(
