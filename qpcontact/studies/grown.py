@@ -304,6 +304,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="where grown states are saved and reused (default: ~/.cache/qpcontact-grown)")
     parser.add_argument("--reuse", action="store_true", help="take the one-step table's states from --cache-dir "
                         "without growing (the time-to-grow table is then left out)")
+    parser.add_argument("--no-step-table", action="store_true", help="time the growth only (the one-step table, "
+                        "with its tight reference steps and velocity-step solves, is left out)")
     add_output_arguments(parser, "bench-grown", "grown.md, grown.json and grown.png")
 
 
@@ -329,7 +331,7 @@ def run_command(args: argparse.Namespace) -> int:
     steps: list[dict[str, Any]] = []
     kinds = [(f"position, {name}", "position", dict(position_solver=name)) for name in args.position_solvers]
     kinds += [(label, "velocity", changes) for label, changes in VELOCITY_SOLVES]
-    for dimensions in args.dimensions:
+    for dimensions in [] if args.no_step_table else args.dimensions:
         for size in sizes:
             state = args.cache_dir / f"{dimensions}d-{size}.npz"
             if not state.exists():

@@ -28,6 +28,15 @@ def test_bench_grown_writes_its_tables(tmp_path):
     assert cli.main(["bench-grown", "--sizes", "8", "--out", str(out), "--cache-dir", str(cache), "--reuse"]) == 2
 
 
+def test_bench_grown_can_time_the_growth_alone(tmp_path):
+    out, cache = tmp_path / "out", tmp_path / "cache"
+    assert cli.main(["bench-grown", "--sizes", "8", "--steps", "position", "--no-step-table", "--out", str(out),
+                     "--cache-dir", str(cache)]) == 0
+    data = json.loads((out / "grown.json").read_text())
+    assert [r["step"] for r in data["growth"]] == ["position"] and data["steps"] == []
+    assert "Time to grow" in (out / "grown.md").read_text()
+
+
 def test_peer_times_read_the_cellmodeller_log(tmp_path):
     log = tmp_path / "log.json"
     rows = [dict(step=i + 1, n=2 ** (i // 3), t_sim=0.5) for i in range(30)]
