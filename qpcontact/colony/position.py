@@ -333,7 +333,13 @@ def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int, pair
     every pair, whatever its ends: across the linearizations the closest point moves along the
     pair, and only kind 0 follows it; docs/model-notes.md), among the candidate ``pairs`` when
     given (a superset of the pairs within reach, :func:`_first_pairs`)."""
-    pairs = candidate_pairs(cells, reach) if pairs is None else pairs
+    if pairs is None:
+        pairs = candidate_pairs(cells, reach)
+    else:  # a superset for several configurations: the pairs whose enclosing spheres are within reach here
+        i, j = pairs[:, 0], pairs[:, 1]
+        apart = cells.centers[i] - cells.centers[j]
+        within = 0.5 * (cells.lengths[i] + cells.lengths[j]) + cells.radii[i] + cells.radii[j] + reach
+        pairs = pairs[np.einsum("ij,ij->i", apart, apart) <= within * within]
     a, b, kind = select_contacts(cells, pairs, reach, always_closest=True)
     parts = [(a, b, kind)]
     for j, plane in enumerate(planes):
