@@ -10,22 +10,27 @@ from one step to the next. Active-set and semismooth Newton methods (PDAS, proje
 Fischer–Burmeister Newton, a semismooth augmented Lagrangian warm-started from the last step),
 first-order methods (ADMM with one factorization, projected Gauss–Seidel, MPRGP) and warm starts
 of this method from the last step all cost more on those problems (docs/model-notes.md, "A step
-that scales"); an interior-point method is indifferent to redundancy and needs 10–20
+that scales"); an interior-point method is indifferent to redundancy and needs 11–16
 factorizations whatever the colony.
 
-Each iteration solves one linear system in the unknowns ỹ, the normal equations of the Newton
-step (Mehrotra predictor–corrector, both directions from one factorization)::
+The bounds are rows like the contacts (:class:`_Rows`): ``ỹ_j ≥ l_j`` and ``−ỹ_j ≥ −u_j``, so the
+constraints are ``Gỹ ≥ c`` with ``G = [B̃; S]`` and every row has a slack ``z ≥ 0`` and a
+multiplier ``v ≥ 0`` (the contact impulses ``λ̃``, then the bound multipliers). Each iteration
+solves one linear system in the unknowns ỹ, the normal equations of the Newton step (Mehrotra
+predictor–corrector and Gondzio's centrality correctors, all from one factorization)::
 
-    (I + diag(α/p + β/q) + B̃ᵀ diag(λ/s) B̃) Δỹ = r,
+    (I + Gᵀ diag(v/z) G) Δỹ = (I + diag(Sᵀ(v/z)) + B̃ᵀ diag(λ/s) B̃) Δỹ = r,
 
-with ``s = B̃ỹ − b̃`` the contact slacks, ``λ`` their impulses and ``α, β`` (``p, q``) the bound
-multipliers (slacks). The matrix has the sparsity of ``I + B̃ᵀB̃``: a cell's unknowns coupled with
-those of the cells it touches, smaller than the contacts' own normal matrix ``B̃B̃ᵀ`` (the one
-this solver factorized until 2026-12; 3× cheaper to factorize on a grown 3D biofilm, where a
-cell has 11 contacts and 6 unknowns). The pattern, its nested-dissection ordering and CHOLMOD's
-symbolic analysis are computed once per problem (:class:`~qpcontact.solvers.cholesky.GramMatrix`),
-and reused by the next problem with the same pattern (the next linearization of a position step
-with the same contacts); each iteration refills the values and factorizes.
+with ``s = B̃ỹ − b̃`` the contact slacks. The matrix has the sparsity of ``I + B̃ᵀB̃`` (the bound
+rows add to its diagonal): a cell's unknowns coupled with those of the cells it touches, smaller
+than the contacts' own normal matrix ``B̃B̃ᵀ`` (3× cheaper to factorize on a grown 3D biofilm,
+where a cell has 11 contacts and 6 unknowns). The pattern, its nested-dissection ordering and
+the symbolic analysis are computed once per problem
+(:class:`~qpcontact.solvers.cholesky.GramMatrix`), and reused by the next problem with the same
+pattern (the next linearization of a position step with the same contacts); each iteration
+refills the values (one sparse product) and factorizes. Around the factorization an iteration
+does a few passes over the vectors: the step lengths over the slacks and the multipliers, the
+complementarity of a trial point from four dot products (docs/model-notes.md, "A lean step").
 
 Stopping (all in the scaled units of :mod:`qpcontact.assembly.system`, ``max b̃ = 1``): the
 largest of the penetration ``max(0, b̃ − B̃ỹ)``, the bound violation, the stationarity residual
