@@ -36,9 +36,10 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-import qpcontact.colony.position as position
-from qpcontact.colony import divide, grow_position, growth_time_step, load_colony
+import qpcontact.timestep.position as position
+from qpcontact.colony import divide, grow_position, growth_time_step
 from qpcontact.geometry import substrate
+from qpcontact.io import load_colony
 from qpcontact.solvers import Problem, solve
 from qpcontact.solvers.cholesky import GramMatrix
 from qpcontact.solvers.ipm import interior_point

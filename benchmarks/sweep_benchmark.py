@@ -5,7 +5,7 @@ separate processes with one worker killed in the middle of a run.
 ``python benchmarks/sweep_benchmark.py [--cells 2000] [--runs 8] [--workers 2] [--out DIR]`` (a developer's
 tool, from the repository root; not installed with the package)
 
-1. *One after the other*: :func:`qpcontact.colony.sweep.run_task` for seeds 1..runs in this
+1. *One after the other*: :func:`qpcontact.ensembles.sweep.run_task` for seeds 1..runs in this
    process (the work of each task, without Dask): wall time of each and in total.
 2. *Sweep*: ``qpcontact sweep`` of the same runs on a ``LocalCluster`` of ``--workers`` worker
    processes (cluster start included): wall time, speed-up over 1, and the overhead per task,
@@ -37,11 +37,11 @@ from pathlib import Path
 from typing import Any
 
 from qpcontact.arguments import positive_int, run_standalone
-from qpcontact.colony import sweep
-from qpcontact.colony.runs import RunFolder
-from qpcontact.colony.simulate import Settings
+from qpcontact.ensembles import sweep
 from qpcontact.errors import OutputFolderError
+from qpcontact.io.runs import RunFolder
 from qpcontact.outputs import prepare_folder, write_text
+from qpcontact.simulation.simulate import Settings
 
 
 def one_after_the_other(cells: int, runs: int, out: Path) -> dict[str, Any]:

@@ -31,9 +31,9 @@ CHILD = r"""
 import json, sys, time
 import numpy as np
 import qpcontact.solvers.cholesky as cholesky
-from qpcontact.colony import load_colony
-from qpcontact.colony.settings import Settings
-from qpcontact.colony.simulate import step_function
+from qpcontact.io import load_colony
+from qpcontact.simulation.settings import Settings
+from qpcontact.simulation.simulate import step_function
 factor_seconds = []
 real = cholesky.GramMatrix.factor
 def timed(self, w, d):

@@ -1,6 +1,6 @@
 """A 3D biofilm on a substrate, exported to ParaView.
 
-Grows a biofilm from one cell on the plane z = 0 with ``qpcontact.colony.run_colony`` (the
+Grows a biofilm from one cell on the plane z = 0 with ``qpcontact.simulation.run_colony`` (the
 library behind ``qpcontact simulate --dimensions 3 --vtk``), saving a snapshot and a ParaView
 file every few steps, then prints how to look at it. Needs meshio (``pip install
 'qpcontact[vtk]'``).
@@ -18,8 +18,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from qpcontact.colony import RunFolder, Settings, run_colony
-from qpcontact.colony.plots import save_colony_picture
+from qpcontact.io import RunFolder
+from qpcontact.io.plots import save_colony_picture
+from qpcontact.simulation import Settings, run_colony
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcontact as qc
-from qpcontact.colony import Settings, simulate
+from qpcontact.simulation import Settings, simulate
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{cells.n} cells at t = {colony.time:.2f} doubling times; colony length {np.ptp(cells.centers[:, 0]):.1f} µm; "
           f"outermost cell surface at |y| = {reach.max():.3f} µm (walls at {args.width / 2:g} µm)")
 
-    from qpcontact.colony import plots  # matplotlib: only when drawing
+    from qpcontact.io import plots  # matplotlib: only when drawing
 
     args.out.mkdir(parents=True, exist_ok=True)
     picture = plots.save_colony_picture(args.out / "channel.png", cells, f"{cells.n} cells in a {args.width:g} µm channel",

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcontact as qc
-from qpcontact.colony import PositionSettings, largest_overlap, position_step
+from qpcontact.timestep import PositionSettings, largest_overlap, position_step
 
 
 def packed_layer(rows: int, overlap: float, seed: int = 1) -> qc.Cells:

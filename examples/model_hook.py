@@ -2,7 +2,7 @@
 scripts do).
 
 ``hook(colony, step)`` is called at the start of every step of ``qpcontact simulate`` (with
-``--hook examples/model_hook.py``) or of ``qpcontact.colony.run_colony(..., hook=hook)``. Here:
+``--hook examples/model_hook.py``) or of ``qpcontact.simulation.run_colony(..., hook=hook)``. Here:
 
 - **growth rates**: nutrients run short inside the colony, so a cell grows at
   ``ln 2 · (0.3 + 0.7 r/R)``, ``r`` its distance from the colony's centre and ``R`` the largest;
@@ -29,7 +29,9 @@ from pathlib import Path
 
 import numpy as np
 
-from qpcontact.colony import Colony, RunFolder, Settings, StepControl, push, run_colony
+from qpcontact.colony import Colony, StepControl, push
+from qpcontact.io import RunFolder
+from qpcontact.simulation import Settings, run_colony
 
 SEED = 2024
 #: Growth rate of a cell at the colony's edge [1/doubling time].
@@ -82,7 +84,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{colony.cells.n} cells ({swimmers.sum()} swimmers) at t = {colony.time:.2f} doubling times; the swimmers "
           f"pulled the colony's centre to x = {x.mean():+.2f} µm; lengths {colony.cells.lengths.min():.2f}-"
           f"{colony.cells.lengths.max():.2f} µm")
-    from qpcontact.colony.plots import save_colony_picture
+    from qpcontact.io.plots import save_colony_picture
 
     folder.note(save_colony_picture(args.out / "colony.png", colony.cells, f"model_hook.py: {colony.cells.n} cells",
                                     values=colony.cell_types, value_label="type (0: A, 1: B swims along +x)",

@@ -2,9 +2,9 @@
 contacts put on it, so that a colony stalls inside and grows at its edge.
 
 ``hook(colony, step, mechanics)`` is called at the start of every step of ``qpcontact simulate``
-(with ``--hook examples/pressure_growth.py``) or of ``qpcontact.colony.run_colony(..., hook=hook)``;
+(with ``--hook examples/pressure_growth.py``) or of ``qpcontact.simulation.run_colony(..., hook=hook)``;
 because it takes a parameter named ``mechanics``, the run hands it each cell's pressure and
-stress over the step before (a :class:`qpcontact.colony.CellMechanics`; 2D pressure in F/µm,
+stress over the step before (a :class:`qpcontact.timestep.CellMechanics`; 2D pressure in F/µm,
 F the force that moves 1 µm³ of cell at 1 µm per doubling time). Here:
 
 - each cell's own rate is drawn once for its id around ln 2 (10 % spread), so the hook can
@@ -38,7 +38,10 @@ from pathlib import Path
 import numpy as np
 
 from qpcontact import pressure_growth_rate
-from qpcontact.colony import CellMechanics, Colony, RunFolder, Settings, run_colony
+from qpcontact.colony import Colony
+from qpcontact.io import RunFolder
+from qpcontact.simulation import Settings, run_colony
+from qpcontact.timestep import CellMechanics
 
 SEED = 2024
 #: The mean growth rate of a free cell [1/doubling time].
@@ -84,7 +87,7 @@ def main(argv: list[str] | None = None) -> int:
         pressure = run.mechanics.pressure
         print(f"{name}: {run.colony.cells.n} cells at t = {run.colony.time:.2f} doubling times, pressure "
               f"{np.median(pressure):.1f} (median) {pressure.max(initial=0.0):.1f} (largest) F/µm")
-    from qpcontact.colony.plots import plot_pressure_profile, pressure_label, save_colony_picture
+    from qpcontact.io.plots import plot_pressure_profile, pressure_label, save_colony_picture
 
     cells, pressure = slowed.colony.cells, slowed.mechanics.pressure
     folder.note(save_colony_picture(args.out / "colony.png", cells, f"pressure_growth.py: {cells.n} cells, growth "

@@ -5,41 +5,21 @@ Data flow, one wing each (a wing imports only from itself and the wings before i
 :mod:`~qpcontact.assembly` (:func:`build_system`) → :mod:`~qpcontact.solvers` (one registry:
 the plain linear solve, MPRGP, every qpsolvers backend) → :mod:`~qpcontact.resolve`
 (:func:`resolve`, one call per step, every answer checked → :class:`Result`) →
-:mod:`~qpcontact.colony` (the position-level step :func:`position_step` — what ``qpcontact simulate``
-runs — and :func:`grow_position`; the velocity-level :func:`step` and :func:`grow`; :class:`Colony`,
-snapshots, CellModeller's states (:func:`read_cellmodeller`); the stress and
-pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`; tables
-of a snapshot's cells and of a run's steps as pandas DataFrames: :func:`colony_frame`,
-:func:`run_frame`). The studies
+:mod:`~qpcontact.timestep` (the per-timestep calls: the position-level step :func:`position_step`
+— what ``qpcontact simulate`` runs — and the velocity-level :func:`step`; the stress and
+pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`) →
+:mod:`~qpcontact.colony` (the colony model: :class:`Colony`, :func:`grow_position`,
+:func:`grow`, :func:`divide`, time-step rules, model hooks) → :mod:`~qpcontact.io` (what a run
+writes and reads: snapshots, run folders, CellModeller's states (:func:`read_cellmodeller`),
+tables of a snapshot's cells and of a run's steps as pandas DataFrames: :func:`colony_frame`,
+:func:`run_frame`) → :mod:`~qpcontact.simulation` (the run loop ``run_colony`` and its
+settings) → :mod:`~qpcontact.ensembles` (sweeps on Dask). The studies
 (:mod:`qpcontact.studies`: scenes, catalogue, comparison, stability, benchmark, demo) sit on
 top and are not imported here. docs/architecture.md describes the layout.
 """
 
 from .assembly import ContactSystem, build_system
-from .colony import (
-    CellMotion,
-    Colony,
-    ContactImpulses,
-    PositionSettings,
-    PositionStepResult,
-    StepResult,
-    cell_forces,
-    cell_pressure,
-    cell_stress,
-    colony_frame,
-    divide,
-    expansion_time_step,
-    grow,
-    grow_position,
-    growth_time_step,
-    load_colony,
-    position_step,
-    pressure_growth_rate,
-    read_cellmodeller,
-    run_frame,
-    save_colony,
-    step,
-)
+from .colony import Colony, divide, expansion_time_step, grow, grow_position, growth_time_step
 from .errors import (
     InvalidArgumentError,
     InvalidCellsError,
@@ -51,8 +31,22 @@ from .errors import (
     UnknownSolverError,
 )
 from .geometry import Cells, Contacts, Plane, channel, colliding, concatenate, find_contacts, plane_contacts, substrate
+from .io import colony_frame, load_colony, read_cellmodeller, run_frame, save_colony
 from .resolve import Agreement, Result, SystemSolution, compare_with_linear, reference_solution, resolve, solve_system
 from .solvers import FORMS, FORMULATIONS, SolverSpec, available_solvers, get_solver
+from .timestep import (
+    CellMotion,
+    ContactImpulses,
+    PositionSettings,
+    PositionStepResult,
+    StepResult,
+    cell_forces,
+    cell_pressure,
+    cell_stress,
+    position_step,
+    pressure_growth_rate,
+    step,
+)
 
 __version__ = "0.1.0"
 
@@ -66,3 +60,4 @@ __all__ = [
     "load_colony", "plane_contacts", "pressure_growth_rate", "read_cellmodeller", "reference_solution", "resolve", "run_frame", "save_colony", "solve_system", "step",
     "substrate",
 ]
+

@@ -20,16 +20,16 @@ from .arguments import Parser, exit_status, run_checked
 #: sub-command -> (module, one-line help). Each module has ``add_arguments(parser)`` and ``run_command(args)``.
 COMMANDS = {
     "demo": ("qpcontact.studies.demo", "resolve a small scene with every installed solver and print a table"),
-    "simulate": ("qpcontact.colony.simulate", "grow a colony: snapshots, history, pictures, ParaView files"),
+    "simulate": ("qpcontact.simulation.simulate", "grow a colony: snapshots, history, pictures, ParaView files"),
     "compare": ("qpcontact.studies.compare", "solver comparison: error against run time on colony scenes"),
     "stability": ("qpcontact.studies.stability", "run every solver on the catalogue of stiff and extreme cases"),
     "bench-grown": ("qpcontact.studies.grown", "time to grow a colony from one cell, and one step of a grown colony, "
                     "for each step kind (the benchmark that counts)"),
     "bench": ("qpcontact.studies.bench", "time each phase of a step on colony snapshots"),
-    "sweep": ("qpcontact.colony.sweep", "replicates and parameter sweeps of colony runs, as tasks on Dask"),
-    "table": ("qpcontact.colony.tables", "a snapshot's cells, or a run's time series, as a CSV or Parquet table"),
-    "plot": ("qpcontact.colony.picture", "draw a saved snapshot again as its run drew colony.png"),
-    "import-cellmodeller": ("qpcontact.colony.cellmodeller", "read a CellModeller state (its pickles) into a snapshot "
+    "sweep": ("qpcontact.ensembles.sweep", "replicates and parameter sweeps of colony runs, as tasks on Dask"),
+    "table": ("qpcontact.io.tables", "a snapshot's cells, or a run's time series, as a CSV or Parquet table"),
+    "plot": ("qpcontact.simulation.picture", "draw a saved snapshot again as its run drew colony.png"),
+    "import-cellmodeller": ("qpcontact.io.cellmodeller", "read a CellModeller state (its pickles) into a snapshot "
                             "that simulate --start continues"),
 }
 

@@ -17,7 +17,7 @@ described fields. From it this module generates
   :func:`merge`.
 
 The rules that tie settings to each other (what applies to which run) belong to the tree's own
-module (:mod:`qpcontact.colony.settings`). Standard library only; importable from every wing.
+module (:mod:`qpcontact.simulation.settings`). Standard library only; importable from every wing.
 """
 
 from __future__ import annotations

@@ -78,5 +78,5 @@ class ModelHookError(QPContactError, RuntimeError):
 class RefusedPickleError(InvalidSnapshotError):
     """A pickle was refused: it asks for a class or function that the state it should hold does
     not have, which is then neither built nor called (loading a pickle can run any code its
-    author put in it; :func:`qpcontact.colony.cellmodeller.load_pickle` builds only what a
+    author put in it; :func:`qpcontact.io.cellmodeller.load_pickle` builds only what a
     CellModeller state holds). The message names what it asked for."""

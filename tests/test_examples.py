@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from qpcontact.colony import PositionSettings
+from qpcontact.timestep import PositionSettings
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -68,7 +68,7 @@ def test_a_colony_between_walls_stays_between_them(tmp_path, capsys):
 
 def test_a_3d_biofilm_is_exported_to_paraview(tmp_path, capsys):
     pytest.importorskip("meshio", reason="the example needs qpcontact[vtk]")
-    from qpcontact.colony.paraview import read_series
+    from qpcontact.io.paraview import read_series
 
     assert run_example("biofilm_paraview", "--out", str(tmp_path)) == 0
     series = read_series(tmp_path / "colony.pvd")
@@ -88,7 +88,7 @@ def test_the_model_hook_example_runs_as_a_script_and_as_a_model(tmp_path):
     assert run_example("model_hook", "--out", str(tmp_path / "script")) == 0
     import numpy as np
 
-    from qpcontact.colony.snapshots import load_snapshot
+    from qpcontact.io.snapshots import load_snapshot
 
     # Issue 27: types by lineage (before, drawn per cell id: sisters differed half the time).
     colony = load_snapshot(sorted((tmp_path / "script" / "snapshots").glob("step_*.npz"))[-1]).colony

@@ -156,7 +156,7 @@ class Turned:
     """Contacts evaluated at the end of a step that turned the cells: the unknowns stay in the
     slots of the cells at the start of the step (their axes, their W), and the rows of ``M`` are
     the exact derivatives of the end-of-step normal gaps (the position-level step,
-    :mod:`qpcontact.colony.position`).
+    :mod:`qpcontact.timestep.position`).
 
     Attributes:
         axes: (N, 3) the axes at the end of the step (a contact point rides along these as the

@@ -41,8 +41,8 @@ from ..checks import flag, instance, integer, integer_array, number, real_array
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Plane, capsule_volume
 from ..geometry.motion import rotate
-from .position import CellMotion, ContactImpulses, PositionSettings, PositionStepResult, position_step
-from .step import StepResult, step
+from ..timestep.position import CellMotion, ContactImpulses, PositionSettings, PositionStepResult, position_step
+from ..timestep.step import StepResult, step
 
 
 @dataclass(frozen=True, eq=False)
@@ -365,12 +365,12 @@ def _grown(colony: Colony, before: Cells, after: Cells, paid: np.ndarray, dt: fl
 
 def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.ndarray | None = None,
          **step_options: Any) -> tuple[Colony, StepResult]:
-    """One growth step with the velocity-level :func:`qpcontact.colony.step` (no division: call
+    """One growth step with the velocity-level :func:`qpcontact.timestep.step` (no division: call
     :func:`divide` before it, so that the step's contact solve sees the daughters).
 
     The growth drive (:func:`growth_drive` of :func:`growth_step`) enters as the growth momentum
     — overdamped, as the growth column of ``drive``; inertial, by setting ``g`` (growth is a
-    biological motor, not inertia) — then :func:`qpcontact.colony.step` with ``step_options``.
+    biological motor, not inertia) — then :func:`qpcontact.timestep.step` with ``step_options``.
     ``drive`` adds user-given momenta (its growth column is ignored). Afterwards masses and
     growth inertias grow with the volume including what is owed (constant density), and the
     owed length drops by what was paid. Returns the colony at ``t + dt`` and the step's result

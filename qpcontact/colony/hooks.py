@@ -56,8 +56,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidArgumentError, ModelHookError
+from ..timestep.mechanics import CellMechanics
 from .growth import Colony
-from .mechanics import CellMechanics
 
 
 @dataclass

@@ -9,9 +9,9 @@ Nothing in the other wings imports from here.
   :func:`guarded`);
 - commands: :mod:`.demo`, :mod:`.compare`, :mod:`.stability`, :mod:`.bench`, :mod:`.grown`
   (``qpcontact COMMAND``); ``compare`` and ``stability`` hand their runs to Dask with
-  ``--scheduler``/``--workers`` (:mod:`qpcontact.cluster`).
+  ``--scheduler``/``--workers`` (:mod:`qpcontact.ensembles.cluster`).
 
-``qpcontact sweep`` (a user feature, not a study) is :mod:`qpcontact.colony.sweep`; the
+``qpcontact sweep`` (a user feature, not a study) is :mod:`qpcontact.ensembles.sweep`; the
 developer's measurements (a sweep against its runs one after the other, before/after timings)
 are scripts in the repository's ``benchmarks/`` folder, not installed.
 """

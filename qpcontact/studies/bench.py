@@ -55,9 +55,9 @@ import numpy as np
 
 from ..arguments import add_output_arguments, comma_list, non_negative_int, positive_float, positive_int, run_standalone
 from ..assembly import ContactSystem, build_system
-from ..colony.snapshots import load_cells, save_cells
 from ..errors import OutputFolderError
 from ..geometry import Cells, colliding, find_contacts
+from ..io.snapshots import load_cells, save_cells
 from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import active_set_polish, metrics, reference_solution, solve_system
 from ..solvers import available_solvers, get_solver, solve_min_norm
@@ -80,7 +80,7 @@ GENERATORS: dict[int, Callable[[int, int], Cells]] = {2: scenes.colony_2d, 3: sc
 # ------------------------------------------------------------------------------------------
 def load_scene(dimensions: int, n_cells: int, seed: int, cache_dir: Path | None) -> Cells:
     """The colony snapshot ``colony_{dimensions}d(n_cells, seed)``, from ``cache_dir`` if built
-    before (:func:`qpcontact.colony.snapshots.save_cells`)."""
+    before (:func:`qpcontact.io.snapshots.save_cells`)."""
     path = None if cache_dir is None else cache_dir / f"colony_{dimensions}d_{n_cells}_{seed}.npz"
     if path is not None and path.exists():
         return load_cells(path)

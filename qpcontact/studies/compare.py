@@ -25,7 +25,7 @@ within ``ACCURACY_FACTOR·tolerance`` of the reference; a run that says it conve
 that close is counted as *reported success, inaccurate*. Each run is made in a child process
 with a hard time-out (:func:`qpcontact.studies.harness.guarded`), so a backend without a time
 limit of its own (or one that crashes) cannot stop the comparison. With ``--scheduler ADDRESS``
-or ``--workers N`` the runs are Dask tasks (:mod:`qpcontact.cluster`), each still in its
+or ``--workers N`` the runs are Dask tasks (:mod:`qpcontact.ensembles.cluster`), each still in its
 guarded child process with the same time-out; the references are computed here meanwhile.
 
 Outputs in ``--out``: ``solvers.csv`` (every run), ``solvers.png`` (error against time, log–log,
@@ -51,9 +51,9 @@ from typing import Any
 import numpy as np
 import qpsolvers
 
-from .. import cluster
 from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
 from ..assembly import ContactSystem, build_system
+from ..ensembles import cluster
 from ..errors import InvalidArgumentError, UnknownSolverError
 from ..geometry import colliding, find_contacts
 from ..outputs import describe_written, prepare_folder, write_text

@@ -5,7 +5,7 @@ grown by ``qpcontact simulate`` is jammed, nearly incompressible and stepped tho
 and its step costs 13–200 times the snapshot's (docs/performance.md). This benchmark measures that
 workload, every step kind side by side in one run on this machine:
 
-1. **Time to grow**: ``qpcontact simulate``'s run (:func:`qpcontact.colony.run_colony`, seed 1,
+1. **Time to grow**: ``qpcontact simulate``'s run (:func:`qpcontact.simulation.run_colony`, seed 1,
    its defaults otherwise) from one cell, for each dimension and step (``position``, the
    default; ``velocity``, the earlier step, stopped at ``--velocity-cells``): the wall time until
    the colony first has each size in ``--sizes``, the steps and linearizations taken, the largest
@@ -42,9 +42,12 @@ from typing import Any
 import numpy as np
 
 from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
-from ..colony import Colony, PositionStepResult, Settings, load_colony, run_colony, save_colony
-from ..colony.simulate import step_function
+from ..colony import Colony
+from ..io import load_colony, save_colony
 from ..outputs import atomic_write, describe_written, prepare_folder, write_text
+from ..simulation import Settings, run_colony
+from ..simulation.simulate import step_function
+from ..timestep import PositionStepResult
 from .bench import machine_description
 from .harness import guarded
 

@@ -37,23 +37,17 @@ from typing import Any
 import numpy as np
 
 from ..arguments import add_output_arguments, positive_int, run_standalone
-from ..colony import (
-    CellMechanics,
-    Colony,
-    Settings,
-    cell_forces,
-    cell_pressure,
-    fit_parabola,
-    load_snapshot,
-    radial_profile,
-)
+from ..colony import Colony
 from ..colony.growth import growth_step
-from ..colony.mechanics import radial_distances
-from ..colony.position import PositionStepResult
-from ..colony.simulate import step_function, step_mechanics
 from ..errors import InvalidArgumentError
 from ..geometry import capsule_footprint, evaluate_contacts
+from ..io import load_snapshot
 from ..outputs import describe_written, prepare_folder, write_text
+from ..simulation import Settings
+from ..simulation.simulate import step_function, step_mechanics
+from ..timestep import CellMechanics, cell_forces, cell_pressure, fit_parabola, radial_profile
+from ..timestep.mechanics import radial_distances
+from ..timestep.position import PositionStepResult
 
 OUTPUTS = ("pressure_profile.png", "pressure_map.png", "pressure_profile.md")
 
@@ -130,7 +124,7 @@ def draw(measured: dict[str, Any], path: Path, title: str) -> Path:
     """The three panels: pressure with fit and predictions, radial velocity, radial and hoop stress."""
     from matplotlib.figure import Figure
 
-    from ..colony.plots import pressure_label
+    from ..io.plots import pressure_label
 
     r = measured["r"]
     grid = np.linspace(0.0, float(r.max()), 200)
@@ -213,7 +207,7 @@ def report(measured: dict[str, Any], source: str) -> str:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from ..colony.plots import pressure_label, save_colony_picture
+    from ..io.plots import pressure_label, save_colony_picture
 
     folder = prepare_folder(args.out, OUTPUTS, overwrite=args.overwrite)
     snapshot = load_snapshot(args.snapshot)

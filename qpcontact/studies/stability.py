@@ -39,7 +39,7 @@ that runs with ``scale=False`` are measured the same way):
 Every run happens in a child process killed after the guard
 (:func:`qpcontact.studies.harness.guarded`), so no backend can hang the report. With
 ``--scheduler ADDRESS`` or ``--workers N`` the runs are Dask tasks
-(:mod:`qpcontact.cluster`), each still in its guarded child process with the same guard.
+(:mod:`qpcontact.ensembles.cluster`), each still in its guarded child process with the same guard.
 """
 
 from __future__ import annotations
@@ -58,7 +58,6 @@ from typing import Any
 
 import numpy as np
 
-from .. import cluster
 from ..arguments import (
     add_output_arguments,
     comma_list,
@@ -68,6 +67,7 @@ from ..arguments import (
     positive_int,
     run_standalone,
 )
+from ..ensembles import cluster
 from ..errors import InvalidArgumentError, QPContactError
 from ..outputs import describe_written, prepare_folder, write_text
 from ..outputs import write_csv as write_table

@@ -8,8 +8,9 @@ from scipy.spatial.transform import Rotation
 
 import qpcontact as qc
 from qpcontact.assembly.system import build_system
-from qpcontact.colony import advance, rotate
 from qpcontact.geometry.contacts import Contacts
+from qpcontact.geometry.motion import rotate
+from qpcontact.timestep import advance
 
 
 def random_cell(rng):
@@ -93,8 +94,8 @@ def test_seed_closed_form_normal_equation_block_is_not_MtM():
 
 def package_point(cell, sigma, e, h):
     """The body point at time h as the package's own integrator moves it:
-    :func:`qpcontact.colony.advance` (centre, axis by the exact rotation, length) and
-    :func:`qpcontact.colony.rotate` for the radial offset, which turns with the body."""
+    :func:`qpcontact.timestep.advance` (centre, axis by the exact rotation, length) and
+    :func:`qpcontact.geometry.motion.rotate` for the radial offset, which turns with the body."""
     moved = advance(cell, h)
     radial = rotate(e[None], cell.angular_velocities * h)[0]
     return moved.centers[0] + sigma * moved.lengths[0] * moved.axes[0] + cell.radii[0] * radial

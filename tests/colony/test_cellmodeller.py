@@ -16,9 +16,9 @@ import pytest
 
 import qpcontact as qc
 from qpcontact.cli import main
-from qpcontact.colony import Snapshot, load_snapshot
-from qpcontact.colony.cellmodeller import CellState, load_pickle, read_cellmodeller
 from qpcontact.errors import InvalidArgumentError, InvalidSnapshotError, RefusedPickleError
+from qpcontact.io import Snapshot, load_snapshot
+from qpcontact.io.cellmodeller import CellState, load_pickle, read_cellmodeller
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "cellmodeller"
 RUN = DATA / "ex1_simpleGrowth_seed1"

@@ -10,9 +10,9 @@ import pytest
 
 from qpcontact.cli import main
 from qpcontact.colony import StepControl, push
-from qpcontact.colony.runs import RunFolder
-from qpcontact.colony.simulate import Settings, run_colony
 from qpcontact.errors import ModelHookError
+from qpcontact.io.runs import RunFolder
+from qpcontact.simulation.simulate import Settings, run_colony
 
 SETTINGS = Settings().updated({"cells": 10**6, "max_dt": 0.1, "max_steps": 30, "rate_noise": 0.0})
 
@@ -53,7 +53,7 @@ def test_a_hook_that_takes_mechanics_gets_each_cells_pressure_of_the_step_before
     """One entry per cell of the colony it is given (after division: a newborn has its mother's),
     zero before the first step, 2D pressure in a 2D run; the pressure the run's history records
     for the step before (over the cells before division) has the same largest value."""
-    from qpcontact.colony import CellMechanics
+    from qpcontact.timestep import CellMechanics
 
     seen = []
 

@@ -1,4 +1,4 @@
-"""Contact forces, per-cell stress and pressure (qpcontact.colony.mechanics): the forces of the
+"""Contact forces, per-cell stress and pressure (qpcontact.timestep.mechanics): the forces of the
 position-level step against statics worked out by hand (a column resting on a plane carries the
 weight above each contact, a cell pushed against a wall presses with its drive, a growing rod
 between two walls), action and reaction in a jammed cluster, the stress of a cell by hand, and
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 import qpcontact as qc
-from qpcontact.colony import CellMechanics, Colony, PositionSettings, position_step
-from qpcontact.colony.mechanics import fit_parabola, is_planar, pressure_of, radial_profile
+from qpcontact.colony import Colony
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry import Contacts, Plane, capsule_footprint, capsule_volume, substrate
+from qpcontact.timestep import CellMechanics, PositionSettings, position_step
+from qpcontact.timestep.mechanics import fit_parabola, is_planar, pressure_of, radial_profile
 
 RADIUS = 0.5
 
@@ -171,8 +172,9 @@ def test_a_grown_colony_step_balances_forces_and_torques_and_its_pressure_does_n
     taken at the start of the step instead differ by a few per cent (their net forces, small
     differences of large contact forces, do not balance the step's momenta that closely:
     docs/mechanics.md)."""
-    from qpcontact.colony import Settings, grow_position, run_colony
+    from qpcontact.colony import grow_position
     from qpcontact.geometry import evaluate_contacts
+    from qpcontact.simulation import Settings, run_colony
 
     colony = run_colony(Settings().updated({"cells": 60}), progress=False).colony
     _, out = grow_position(colony, 0.05, planar=True)
@@ -256,7 +258,7 @@ def test_pressure_growth_rate_linear_and_exponential():
     with pytest.raises(InvalidArgumentError, match="finite"):
         qc.pressure_growth_rate(-1.0, pressure, stall_pressure=1.0)
     with pytest.raises(InvalidArgumentError, match="law"):
-        qc.colony.PressureGrowth("cubic", 1.0)
+        qc.timestep.PressureGrowth("cubic", 1.0)
 
 
 def test_mechanics_carried_over_division_go_to_both_daughters():

@@ -1,4 +1,4 @@
-"""ParaView files of a run (qpcontact.colony.paraview): read back with meshio, the library that
+"""ParaView files of a run (qpcontact.io.paraview): read back with meshio, the library that
 writes them, and by a reader of the VTK XML format (what ParaView reads) written here."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from qpcontact.cli import main
-from qpcontact.colony.paraview import ARRAYS, MECHANICS_ARRAYS, read_series
-from qpcontact.colony.snapshots import load_snapshot
+from qpcontact.io.paraview import ARRAYS, MECHANICS_ARRAYS, read_series
+from qpcontact.io.snapshots import load_snapshot
 
 meshio = pytest.importorskip("meshio", reason="ParaView files need the extra qpcontact[vtk]")
 
@@ -142,7 +142,7 @@ def test_vtk_without_meshio_is_a_one_line_error(tmp_path, monkeypatch, capsys):
 def test_cell_types_and_a_models_per_cell_arrays_are_cell_data_of_the_files(tmp_path):
     """Issue 27: the types and each cell_data array (booleans as 0/1, several numbers per cell
     as components, a name of a built-in array prefixed) reach ParaView."""
-    from qpcontact.colony.paraview import write_vtu
+    from qpcontact.io.paraview import write_vtu
 
     run = _small_run(tmp_path)
     snapshot = load_snapshot(sorted(run.glob("snapshots/step_*.npz"))[-1])

@@ -12,14 +12,14 @@ import qpcontact as q
 
 
 def test_importing_plots_neither_sets_the_backend_nor_loads_pyplot():
-    code = ("import sys, matplotlib; from qpcontact.colony import plots; "
+    code = ("import sys, matplotlib; from qpcontact.io import plots; "
             "print('matplotlib.pyplot' in sys.modules, matplotlib.rcParams._get_backend_or_none())")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "None"]
 
 
 def test_pictures_are_written(tmp_path):
-    from qpcontact.colony import plots
+    from qpcontact.io import plots
 
     cells = q.Cells(centers=[[0, 0, 0], [3, 0, 0], [0, 3, 0.5]], axes=[[1, 0, 0], [0, 1, 0], [0.6, 0.8, 0]],
                     lengths=[2.0, 1.0, 0.0], radii=0.5)
@@ -34,7 +34,7 @@ def test_pictures_are_written(tmp_path):
 
 def test_history_panels_do_not_plot_clipped_floors_as_data():
     """Zeros (no overlap, no contact) were drawn at 1e-6 and 1e-16 as if measured."""
-    from qpcontact.colony import plots
+    from qpcontact.io import plots
 
     history = {"time": [0.0, 1.0, 2.0], "cells": [1, 2, 2], "max_overlap": [0.0, 0.01, 0.0],
                "mean_overlap": [0.0, 0.005, 0.0], "solve_seconds": [0.0, 0.02, 0.01],
@@ -55,7 +55,7 @@ def test_history_panels_do_not_plot_clipped_floors_as_data():
 def test_each_history_panel_of_a_position_run_shows_its_own_quantity():
     """history.png plotted the position step's overlap twice: as "largest overlap" and as a
     solver "penetration" labelled dimensionless and scaled."""
-    from qpcontact.colony import plots
+    from qpcontact.io import plots
 
     history = {"time": [0.0, 1.0, 2.0], "cells": [1, 2, 3], "max_overlap": [0.004, 0.009, 0.008],
                "mean_overlap": [0.001, 0.002, 0.002], "solve_seconds": [0.01, 0.02, 0.03],
@@ -73,7 +73,7 @@ def test_a_3d_colony_is_drawn_from_above_and_from_the_side_with_walls_and_units(
     """3D colonies were seen from above only, walls were not drawn, axes had no units."""
     from matplotlib.figure import Figure
 
-    from qpcontact.colony import plots
+    from qpcontact.io import plots
 
     saved = []
     monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
@@ -94,8 +94,8 @@ def test_a_3d_colony_is_drawn_from_above_and_from_the_side_with_walls_and_units(
 def test_cells_coloured_by_pressure_have_a_colour_bar_with_units_and_the_profile_a_fit(tmp_path, monkeypatch):
     from matplotlib.figure import Figure
 
-    from qpcontact.colony import plots
     from qpcontact.errors import InvalidArgumentError
+    from qpcontact.io import plots
 
     saved = []
     monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))

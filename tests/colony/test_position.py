@@ -1,4 +1,4 @@
-"""The position-level step (qpcontact.colony.position): the end positions are free of overlap
+"""The position-level step (qpcontact.timestep.position): the end positions are free of overlap
 (decided by an independent brute-force capsule distance), analytic cases come out exact, overlap
 present at the start shrinks at the set speed, turning and shrinking are bounded, and a step that
 does not converge is reported and not applied."""
@@ -8,10 +8,10 @@ import pytest
 
 import qpcontact as qc
 from qpcontact.colony import Colony, divide, grow_position, growth_time_step
-from qpcontact.colony.position import PositionSettings, move, position_step
 from qpcontact.errors import InvalidArgumentError, StepFailedError
 from qpcontact.geometry import substrate
 from qpcontact.studies import scenes
+from qpcontact.timestep.position import PositionSettings, move, position_step
 
 
 def segment_distance(p0, p1, q0, q1, samples=4001):
@@ -254,7 +254,7 @@ def test_an_answer_the_solver_did_not_stand_by_is_never_applied(monkeypatch):
     """Before: only a missing or non-finite answer failed the step; a stalled solve was applied."""
     import dataclasses
 
-    import qpcontact.colony.position as position
+    import qpcontact.timestep.position as position
 
     real = position.solve
     monkeypatch.setattr(position, "solve", lambda *a, **k: dataclasses.replace(real(*a, **k), found=False,
@@ -270,7 +270,7 @@ def test_an_update_that_throws_cells_into_each_other_is_backtracked(monkeypatch)
     colony) is not kept: the step goes back towards the last iterate and still converges."""
     import dataclasses
 
-    import qpcontact.colony.position as position
+    import qpcontact.timestep.position as position
 
     real, calls = position.solve, []
 
@@ -345,7 +345,7 @@ def test_an_answer_that_fails_the_acceptance_checks_is_never_applied(monkeypatch
     the solver reports as converged but that penetrates is refused, and the step fails unapplied."""
     import dataclasses
 
-    import qpcontact.colony.position as position
+    import qpcontact.timestep.position as position
 
     real = position.solve
     monkeypatch.setattr(position, "solve", lambda *a, **k: dataclasses.replace(real(*a, **k), y=np.zeros_like(
@@ -361,8 +361,8 @@ def test_end_positions_agree_with_a_tight_step_to_a_thousandth_of_a_diameter(dim
     """Issue 22: accuracy is not bought with speed. On a colony grown by ``simulate``'s defaults,
     one default step ends within 10⁻³ of a diameter (every cell's centre and tips) of the same
     step solved at tolerance 10⁻⁸ (``qpcontact bench-grown`` reports the same on the large states)."""
-    from qpcontact.colony import Settings, run_colony
-    from qpcontact.colony.simulate import step_function
+    from qpcontact.simulation import Settings, run_colony
+    from qpcontact.simulation.simulate import step_function
     from qpcontact.studies.grown import REFERENCE_TOLERANCE, end_difference
 
     settings = Settings().updated({"cells": n_cells, "dimensions": dimensions}, "test")

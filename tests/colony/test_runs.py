@@ -1,4 +1,4 @@
-"""Runs that lose nothing (qpcontact.colony.runs): the output folder is checked first, Ctrl-C
+"""Runs that lose nothing (qpcontact.io.runs): the output folder is checked first, Ctrl-C
 saves the state reached, a resumed run continues the same trajectory bit for bit, and the
 settings travel with the run (config.toml, snapshots)."""
 
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from qpcontact.cli import main
-from qpcontact.colony import simulate
-from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder, read_toml, write_toml
-from qpcontact.colony.simulate import Settings, run_colony
-from qpcontact.colony.snapshots import load_snapshot
 from qpcontact.errors import OutputFolderError
+from qpcontact.io.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder, read_toml, write_toml
+from qpcontact.io.snapshots import load_snapshot
+from qpcontact.simulation import simulate
+from qpcontact.simulation.simulate import Settings, run_colony
 from tests.helpers import default_signals, gate_model, wait_for
 
 #: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
@@ -302,7 +302,7 @@ def test_a_run_with_pressure_growth_resumed_from_a_snapshot_equals_the_uninterru
     """The growth of each step depends on the pressure of the step before: the snapshots keep it,
     so a run resumed from one continues exactly (a run that forgot it would grow the first step
     after the resume unslowed)."""
-    from qpcontact.colony import PressureGrowth
+    from qpcontact.timestep import PressureGrowth
 
     settings = Settings().updated({"cells": 10**6, "max_steps": 40})
     growth = PressureGrowth("exponential", 5.0)

@@ -1,4 +1,4 @@
-"""The settings of a colony run (qpcontact.colony.settings): one description per setting, from
+"""The settings of a colony run (qpcontact.simulation.settings): one description per setting, from
 which the flags, the TOML tables and the sweep's names are generated; one merge; every flag
 applies to the run or is refused (exit status 2, one line saying why) before anything is
 written; a continued run refuses the changes that would corrupt it."""
@@ -12,11 +12,12 @@ import numpy as np
 import pytest
 
 from qpcontact import cli
-from qpcontact.colony import PositionSettings, Settings, run_colony
-from qpcontact.colony.runs import read_toml
-from qpcontact.colony.settings import FORMER_NAMES
-from qpcontact.colony.snapshots import load_snapshot, save_colony
 from qpcontact.described import find_setting, settings_of
+from qpcontact.io.runs import read_toml
+from qpcontact.io.snapshots import load_snapshot, save_colony
+from qpcontact.simulation import Settings, run_colony
+from qpcontact.simulation.settings import FORMER_NAMES
+from qpcontact.timestep import PositionSettings
 
 
 def simulate_parser():
@@ -65,7 +66,7 @@ def test_position_flags_reach_the_step_and_config_toml(tmp_path, capsys):
 
 
 def test_the_api_reference_shows_the_one_description():
-    from qpcontact.colony import ModelSettings
+    from qpcontact.simulation import ModelSettings
 
     assert "growth_inertia_ratio: each cell's growth inertia G" in (ModelSettings.__doc__ or "")
     assert "[dimensionless, G/m] (default: 1000; > 0)" in (ModelSettings.__doc__ or "")
@@ -213,7 +214,7 @@ def test_a_snapshot_of_an_earlier_version_with_flat_settings_continues(tmp_path)
 def test_the_cycle_time_is_the_time_from_birth_to_division_of_a_free_cell():
     """The time unit is the doubling time of a cylinder's length; daughters are born at
     l/2 − ρ, so a cell's cycle is longer (1.27 units at the defaults, not 1)."""
-    from qpcontact.colony import ModelSettings
+    from qpcontact.simulation import ModelSettings
 
     settings = Settings().updated({"cells": 4, "rate_noise": 0.0, "axis_noise": 0.0, "growth_per_step": 0.002})
     run = run_colony(settings, progress=False)
@@ -249,7 +250,7 @@ def test_pressure_growth_flags_slow_the_run_as_the_law_does_and_are_named_where_
     """--pressure-growth linear --stall-pressure 0.5 runs what run_colony(pressure_growth=
     PressureGrowth("linear", 0.5)) runs, bit for bit; config.toml, the snapshots and the last
     line say so; the same steps without it reach an earlier time (growth is not slowed)."""
-    from qpcontact.colony import PressureGrowth
+    from qpcontact.timestep import PressureGrowth
 
     common = ["--cells", "1000000", "--max-steps", "40", "--quiet"]
     slowed_out, free_out = tmp_path / "slowed", tmp_path / "free"
@@ -277,7 +278,7 @@ def test_pressure_growth_flags_slow_the_run_as_the_law_does_and_are_named_where_
 
 
 def test_the_color_flag_colours_colony_png_by_pressure_and_the_default_by_orientation(tmp_path, monkeypatch):
-    from qpcontact.colony import plots
+    from qpcontact.io import plots
 
     drawn = {}
     original = plots.save_colony_picture

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import qpcontact as q
-from qpcontact.colony import settings as settings_module
-from qpcontact.colony import simulate
-from qpcontact.colony.snapshots import load_colony
 from qpcontact.errors import InvalidArgumentError
+from qpcontact.io.snapshots import load_colony
+from qpcontact.simulation import settings as settings_module
+from qpcontact.simulation import simulate
 
 
 def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
@@ -39,7 +39,7 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
     ({"division_length": 0.5}, "division_length: must exceed 2 × radius = 1 µm"),
 ])
 def test_simulate_settings_are_checked(change, message):
-    from qpcontact.colony.simulate import Settings
+    from qpcontact.simulation.simulate import Settings
 
     with pytest.raises(InvalidArgumentError, match=message):
         Settings().updated(change)
@@ -49,7 +49,7 @@ def test_a_default_run_takes_position_steps_and_keeps_their_tolerance(monkeypatc
     """The README's promise: no contact overlaps by more than 0.01 of a diameter at the end of any
     step of the default run (until issue 19 this test allowed 0.06, which the velocity step met),
     and the default run is the position-level step (every step one call of grow_position)."""
-    from qpcontact.colony.simulate import Settings, run_colony
+    from qpcontact.simulation.simulate import Settings, run_colony
 
     calls = []
     real = simulate.grow_position
@@ -123,9 +123,9 @@ def test_every_saved_snapshot_keeps_the_steps_overlap_tolerance(tmp_path, dimens
     """Until issue 19 the run divided after each step and turned the daughters by the axis noise,
     so the snapshots held overlaps up to 0.047 of a diameter (0.01 promised); division now comes
     first, inside the step that clears it."""
-    from qpcontact.colony.runs import RunFolder
-    from qpcontact.colony.simulate import Settings, run_colony
-    from qpcontact.colony.snapshots import load_snapshot
+    from qpcontact.io.runs import RunFolder
+    from qpcontact.io.snapshots import load_snapshot
+    from qpcontact.simulation.simulate import Settings, run_colony
 
     settings = Settings().updated({"cells": n_cells, "dimensions": dimensions, "snapshot_every": 1})
     run = run_colony(settings, progress=False, folder=RunFolder.create(tmp_path / "run"))
@@ -148,8 +148,8 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
     contact is not in the step's system): the full step ends with half a diameter of overlap;
     with ``overlap_limit`` the step is retried with half the step, which ends touching."""
     from qpcontact.colony.growth import Colony
-    from qpcontact.colony.simulate import Settings, grow_with_retries
-    from qpcontact.colony.step import largest_overlap
+    from qpcontact.simulation.simulate import Settings, grow_with_retries
+    from qpcontact.timestep.step import largest_overlap
 
     cells = q.Cells(centers=[[0, 0, 0], [1.5, 0, 0]], axes=[0, 1, 0], lengths=2.0, radii=0.5, growth_inertia=np.inf)
     colony = Colony.founder(cells, 0.0)
@@ -196,8 +196,9 @@ def test_a_step_that_starts_with_more_overlap_than_relaxation_clears_it_within_t
     removes: ``relaxation`` 0.05 plus ``aim`` 0.02, the gap its linearizations aim at): the run's
     step is taken again clearing it, so the state it ends in (and saves) keeps the tolerance; the
     plain position step would leave ~0.05."""
-    from qpcontact.colony import Colony, PositionSettings, grow_position
-    from qpcontact.colony.simulate import Settings, position_step_function
+    from qpcontact.colony import Colony, grow_position
+    from qpcontact.simulation.simulate import Settings, position_step_function
+    from qpcontact.timestep import PositionSettings
 
     cells = q.Cells([[0.0, 0.0, 0.0], [0.3, 0.88, 0.0]], [1, 0, 0], [2.0, 1.5], 0.5)
     colony = Colony.founder(cells, 0.7)
@@ -214,7 +215,7 @@ def bare_run(settings):
     """What a run was before it measured pressure: the founder, then per step division and the
     run's step function, nothing else (2D: no drive)."""
     from qpcontact.colony import divide
-    from qpcontact.colony.simulate import founder, step_function
+    from qpcontact.simulation.simulate import founder, step_function
 
     model = settings.model
     colony, rng, extra = founder(settings), np.random.default_rng(settings.run.seed), {}
@@ -232,8 +233,8 @@ def bare_run(settings):
 def test_a_run_without_pressure_growth_is_the_bare_loop_bit_for_bit(step):
     """Measuring pressure changes nothing of a trajectory; pressure growth whose factor is
     exactly 1 (a stall pressure of 1e300: 1 − p/1e300 rounds to 1) neither."""
-    from qpcontact.colony import PressureGrowth
-    from qpcontact.colony.simulate import Settings, run_colony
+    from qpcontact.simulation.simulate import Settings, run_colony
+    from qpcontact.timestep import PressureGrowth
 
     settings = Settings().updated({"cells": 40, "step": step, "max_steps": 60})
     reference = bare_run(settings)
@@ -251,9 +252,10 @@ def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rate
     """Linear pressure growth with a stall pressure below the pressures a 150-cell colony
     reaches: fewer cells after the same time, the slowest growth where the pressure is highest,
     and the colony's rates (the base rates that daughters draw around) are not the slowed ones."""
-    from qpcontact.colony import PressureGrowth, StepControl, pressure_growth_rate
-    from qpcontact.colony.runs import RunFolder
-    from qpcontact.colony.simulate import Settings, run_colony
+    from qpcontact.colony import StepControl
+    from qpcontact.io.runs import RunFolder
+    from qpcontact.simulation.simulate import Settings, run_colony
+    from qpcontact.timestep import PressureGrowth, pressure_growth_rate
 
     settings = Settings().updated({"cells": 10**6, "max_steps": 120})
     free = run_colony(settings, progress=False)
@@ -285,7 +287,7 @@ def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rate
     assert min(slowest) < 0.5
     # The snapshot of the last state carries the mechanics the run ended with.
     snapshot = sorted((tmp_path / "run" / "snapshots").glob("*.npz"))[-1]
-    from qpcontact.colony.snapshots import load_snapshot
+    from qpcontact.io.snapshots import load_snapshot
 
     np.testing.assert_array_equal(load_snapshot(snapshot).mechanics.pressure, slowed.mechanics.pressure)
     history = folder.read_history()
@@ -295,8 +297,8 @@ def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rate
 def test_the_history_has_the_mean_and_largest_pressure_and_pictures_colour_by_pressure(tmp_path, monkeypatch):
     from matplotlib.figure import Figure
 
-    from qpcontact.colony.runs import RunFolder
-    from qpcontact.colony.simulate import Settings, draw_pictures, run_colony
+    from qpcontact.io.runs import RunFolder
+    from qpcontact.simulation.simulate import Settings, draw_pictures, run_colony
 
     folder = RunFolder.create(tmp_path / "run")
     settings = Settings().updated({"cells": 30})
@@ -321,8 +323,8 @@ def test_the_history_has_the_mean_and_largest_pressure_and_pictures_colour_by_pr
 # ------------------------------------------------------------------------------------------
 def test_type_rates_are_a_model_setting_of_flags_toml_and_snapshots(tmp_path, capsys):
     from qpcontact.cli import main
-    from qpcontact.colony.runs import read_toml
-    from qpcontact.colony.snapshots import load_snapshot
+    from qpcontact.io.runs import read_toml
+    from qpcontact.io.snapshots import load_snapshot
 
     out = tmp_path / "run"
     assert main(["simulate", "--cells", "4", "--type-rates", "0.5,0.25", "--rate-noise", "0", "--out", str(out),
@@ -351,7 +353,7 @@ def test_type_rates_are_a_model_setting_of_flags_toml_and_snapshots(tmp_path, ca
 
 def test_a_start_with_types_that_type_rates_has_no_rate_for_is_refused_up_front(tmp_path, capsys):
     from qpcontact.cli import main
-    from qpcontact.colony.snapshots import save_colony
+    from qpcontact.io.snapshots import save_colony
 
     colony = simulate.founder(simulate.Settings()).replace(cell_types=[2])
     start = save_colony(tmp_path / "typed.npz", colony, 0)
@@ -366,8 +368,8 @@ def test_a_start_with_types_that_type_rates_has_no_rate_for_is_refused_up_front(
 def test_colony_png_can_be_coloured_by_cell_type(tmp_path, monkeypatch):
     from matplotlib.figure import Figure
 
-    from qpcontact.colony.runs import RunFolder
-    from qpcontact.colony.simulate import Settings, draw_pictures, run_colony
+    from qpcontact.io.runs import RunFolder
+    from qpcontact.simulation.simulate import Settings, draw_pictures, run_colony
 
     settings = Settings().updated({"cells": 6})
     run = run_colony(settings, progress=False, hook=lambda colony, step: colony.replace(cell_types=colony.ids % 3))

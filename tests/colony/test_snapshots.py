@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import qpcontact as q
-from qpcontact.colony import CellMechanics, Colony
-from qpcontact.colony.snapshots import (
+from qpcontact.colony import Colony
+from qpcontact.errors import InvalidArgumentError, InvalidSnapshotError
+from qpcontact.io.snapshots import (
     MECHANICS_FIELDS,
     VERSION,
     cell_arrays,
@@ -19,7 +20,7 @@ from qpcontact.colony.snapshots import (
     save_cells,
     save_colony,
 )
-from qpcontact.errors import InvalidArgumentError, InvalidSnapshotError
+from qpcontact.timestep import CellMechanics
 
 CELL_NAMES = ("centers", "axes", "lengths", "radii", "masses", "growth_inertia", "momenta", "angular_momenta",
               "growth_momenta")

@@ -5,9 +5,9 @@ import pytest
 
 import qpcontact as q
 from qpcontact.colony.growth import Colony, divide, grow
-from qpcontact.colony.step import advance, step
 from qpcontact.errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
 from qpcontact.geometry.motion import rotate
+from qpcontact.timestep.step import advance, step
 
 
 def rod_pair_end_to_end(gap=0.0):
@@ -156,8 +156,8 @@ def test_a_runs_step_options_clear_an_overlap_that_steps_defaults_leave():
     """A new user's loop with step()'s defaults (no margin, no position correction) left an
     overlap of 0.067 of a diameter standing for 50 steps; the difference to qpcontact simulate is
     said in step's docstring, and Settings().step_options() steps as simulate does."""
-    from qpcontact.colony import Settings
-    from qpcontact.colony.step import largest_overlap
+    from qpcontact.simulation import Settings
+    from qpcontact.timestep.step import largest_overlap
 
     cells = q.Cells(centers=[[0, 0, 0], [0, 1.0 - 0.067, 0]], axes=[1, 0, 0], lengths=2.0, radii=0.5)
     plain, run_like = cells, cells

@@ -1,4 +1,4 @@
-"""qpcontact sweep (qpcontact.colony.sweep) and the Dask helpers (qpcontact.cluster): the
+"""qpcontact sweep (qpcontact.ensembles.sweep) and the Dask helpers (qpcontact.ensembles.cluster): the
 grid and its checks before anything starts, a small sweep on a 2-worker local cluster, failed runs
 reported by name, a stopped sweep resumed, a killed worker, and compare/stability on Dask with
 their time limits kept. The runs are tiny (10-60 cells, a few seconds each)."""
@@ -18,11 +18,12 @@ import numpy as np
 import pytest
 
 from qpcontact import cli, cluster
-from qpcontact.colony import PositionSettings, sweep
-from qpcontact.colony.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
-from qpcontact.colony.simulate import Settings, run_colony
+from qpcontact.ensembles import sweep
 from qpcontact.errors import InvalidArgumentError
+from qpcontact.io.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
+from qpcontact.simulation.simulate import Settings, run_colony
 from qpcontact.studies import harness
+from qpcontact.timestep import PositionSettings
 from tests.helpers import default_signals, gate_model, wait_for
 
 distributed = pytest.importorskip("distributed")
@@ -369,7 +370,7 @@ def test_a_run_folder_is_locked_while_its_task_runs_and_freed_when_it_dies(tmp_p
     folder = tmp_path / "run"
     gate = gate_model(tmp_path, 8)
     values = Settings().updated({"cells": 60, "seed": 2, "hook": str(gate), "snapshot_every": 5}).to_tables()
-    code = (f"from qpcontact.colony import sweep; sweep.run_task('r', {values!r}, {str(folder)!r})")
+    code = (f"from qpcontact.ensembles import sweep; sweep.run_task('r', {values!r}, {str(folder)!r})")
     first = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.DEVNULL,
                              stderr=subprocess.PIPE, text=True)
     try:

@@ -12,9 +12,9 @@ import pytest
 
 import qpcontact as qc
 from qpcontact.cli import main
-from qpcontact.colony.runs import HISTORY_FIELDS
-from qpcontact.colony.snapshots import load_snapshot, save_colony
-from qpcontact.colony.tables import CELL_COLUMNS, MECHANICS_COLUMNS, colony_columns
+from qpcontact.io.runs import HISTORY_FIELDS
+from qpcontact.io.snapshots import load_snapshot, save_colony
+from qpcontact.io.tables import CELL_COLUMNS, MECHANICS_COLUMNS, colony_columns
 
 HOOK = """import numpy as np
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import qpcontact as qc
-from qpcontact.colony.step import step
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry import evaluate_contacts, narrow_phase, select_contacts
 from qpcontact.geometry.contacts import ROUNDING
+from qpcontact.timestep.step import step
 
 
 # ------------------------------------------------------------------------------------------

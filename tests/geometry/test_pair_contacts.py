@@ -259,7 +259,7 @@ def test_skew_pairs_get_as_many_contacts_as_mujoco_gives_them(margin):
 
 def test_step_gives_a_skew_pair_one_contact():
     """``step`` (with the margin and position correction of ``simulate --step velocity``) too."""
-    from qpcontact.colony import Settings
+    from qpcontact.simulation import Settings
 
     rng = np.random.default_rng(3)
     for _ in range(10):

@@ -5,9 +5,9 @@ import pytest
 
 import qpcontact as q
 from qpcontact.colony.growth import Colony, grow
-from qpcontact.colony.step import step
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry.surfaces import Plane, channel, plane_contacts, substrate
+from qpcontact.timestep.step import step
 
 
 def test_plane_contact_geometry():

@@ -7,8 +7,9 @@ import re
 
 import pytest
 
-from qpcontact.colony import RunFolder, Settings, run_colony
 from qpcontact.errors import InvalidArgumentError
+from qpcontact.io import RunFolder
+from qpcontact.simulation import Settings, run_colony
 from qpcontact.studies import pressure_profile
 
 
@@ -33,7 +34,7 @@ def test_the_study_writes_its_pictures_and_numbers(snapshot, tmp_path, capsys):
 
 
 def test_a_3d_colony_is_refused(snapshot):
-    from qpcontact.colony import load_colony
+    from qpcontact.io import load_colony
 
     colony, _ = load_colony(snapshot)
     with pytest.raises(InvalidArgumentError, match="2D monolayer"):

@@ -74,14 +74,16 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..arguments import output_folder, run_standalone
+from ..colony.growth import Colony, daughters_share, divide, grow, grow_position
+from ..colony.hooks import Hook, apply_hook, load_hook, push
 from ..described import Layer, settings_of, show
 from ..errors import InvalidArgumentError, ModelHookError, SolverFailedError, StepFailedError
 from ..geometry import Cells, capsule_volume
-from .growth import Colony, daughters_share, divide, grow, grow_position
-from .hooks import Hook, apply_hook, load_hook, push
-from .mechanics import CellMechanics, PressureGrowth
-from .position import CellMotion, ContactImpulses, PositionStepResult
-from .runs import HISTORY_FIELDS, Interrupt, RunFolder, is_inside, latest_snapshot, read_toml
+from ..io.runs import HISTORY_FIELDS, Interrupt, RunFolder, is_inside, latest_snapshot, read_toml
+from ..io.snapshots import Snapshot, load_snapshot
+from ..timestep.mechanics import CellMechanics, PressureGrowth
+from ..timestep.position import CellMotion, ContactImpulses, PositionStepResult
+from ..timestep.step import StepResult, largest_overlap
 from .settings import (
     COLORS,
     Settings,
@@ -93,8 +95,6 @@ from .settings import (
     refuse_unused,
     stored_values,
 )
-from .snapshots import Snapshot, load_snapshot
-from .step import StepResult, largest_overlap
 
 __all__ = ["HISTORY_FIELDS", "Run", "Settings", "StepOutcome", "founder", "grow_with_retries", "run_colony",
            "pressure_growth_of", "step_function", "step_mechanics", "turning_reach"]
@@ -548,7 +548,7 @@ def open_run(args: argparse.Namespace) -> tuple[Settings, Snapshot | None, RunFo
     if snapshot is not None:
         check_types(settings, snapshot.colony)
     if settings.output.vtk:
-        from .paraview import _meshio
+        from ..io.paraview import _meshio
 
         _meshio()  # a named error now if meshio is missing
     if settings.model.hook:
@@ -632,7 +632,7 @@ def colony_picture(path: Path, colony: Colony, mechanics: CellMechanics | None, 
     too in 3D, with the run's planes, coloured as ``color`` says
     (:func:`~qpcontact.colony.plots.colony_colors`: orientation, pressure, cell_type, or a
     ``cell_data`` array's name)."""
-    from .plots import colony_colors, save_colony_picture
+    from ..io.plots import colony_colors, save_colony_picture
 
     planar = settings.run.dimensions == 2
     return save_colony_picture(path, colony.cells, title, side_view=not planar, planes=settings.planes(),
@@ -651,7 +651,7 @@ def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bo
     Raises:
         InvalidArgumentError: ``color`` is not one of :data:`COLORS`.
     """
-    from .plots import animate, plot_history, plot_pressure_profile
+    from ..io.plots import animate, plot_history, plot_pressure_profile
 
     if color not in COLORS:
         raise InvalidArgumentError(f"color: expected one of {', '.join(COLORS)}, got {color!r}")

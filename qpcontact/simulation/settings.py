@@ -50,14 +50,14 @@ from typing import Any
 import numpy as np
 
 from .. import described
+from ..colony.growth import Colony, expansion_time_step, growth_time_step
 from ..described import Layer, Setting, check_fields, documented, setting, settings_of, table
 from ..errors import InvalidArgumentError
 from ..geometry.surfaces import Plane, substrate
+from ..io.runs import read_toml
 from ..solvers import FORMS, QP_FORMULATIONS, get_solver
-from .growth import Colony, expansion_time_step, growth_time_step
-from .mechanics import GROWTH_LAWS
-from .position import PositionSettings
-from .runs import read_toml
+from ..timestep.mechanics import GROWTH_LAWS
+from ..timestep.position import PositionSettings
 
 __all__ = ["COLORS", "FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSettings", "Settings", "VelocitySettings",
            "add_setting_flags", "check_continuation", "file_layer", "flag_layer", "merge", "refuse_unused",

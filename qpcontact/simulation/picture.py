@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InvalidArgumentError, OutputFolderError
+from ..io.snapshots import Snapshot, load_snapshot
+from ..io.tables import snapshot_file
 from .settings import Settings
-from .snapshots import Snapshot, load_snapshot
-from .tables import snapshot_file
 
 
 def snapshot_settings(snapshot: Snapshot) -> Settings:

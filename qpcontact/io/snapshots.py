@@ -91,11 +91,11 @@ from typing import Any
 
 import numpy as np
 
+from ..colony.growth import Colony
 from ..errors import InvalidSnapshotError, QPContactError
 from ..geometry import Cells
 from ..outputs import atomic_write
-from .growth import Colony
-from .mechanics import CellMechanics
+from ..timestep.mechanics import CellMechanics
 
 FORMAT = "qpcontact-colony"
 VERSION = 3

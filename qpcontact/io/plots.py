@@ -37,10 +37,10 @@ from matplotlib.collections import PolyCollection
 from matplotlib.colors import Colormap, ListedColormap
 from matplotlib.figure import Figure
 
+from ..colony.growth import Colony
 from ..errors import InvalidArgumentError
 from ..geometry import Cells
-from .growth import Colony
-from .mechanics import CellMechanics, fit_parabola, radial_distances, radial_profile
+from ..timestep.mechanics import CellMechanics, fit_parabola, radial_distances, radial_profile
 
 #: Points per semicircular cap of a drawn capsule.
 CAP_POINTS = 8

@@ -61,17 +61,17 @@ from typing import Any
 
 import numpy as np
 
-from .. import cluster
 from ..arguments import comma_list, non_negative_int, output_folder, positive_int, run_standalone
+from ..colony.growth import Colony
+from ..colony.hooks import Hook, load_hook
 from ..described import Layer, find_setting, known_names, parse_text, settings_of
 from ..errors import InvalidArgumentError, OutputFolderError, QPContactError
+from ..io.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
+from ..io.snapshots import load_snapshot
 from ..outputs import describe_written, prepare_folder, write_csv, write_text
-from .growth import Colony
-from .hooks import Hook, load_hook
-from .runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
-from .settings import Settings, add_setting_flags, file_layer, flag_layer, merge, refuse_unused
-from .simulate import draw_pictures, run_colony
-from .snapshots import load_snapshot
+from ..simulation.settings import Settings, add_setting_flags, file_layer, flag_layer, merge, refuse_unused
+from ..simulation.simulate import draw_pictures, run_colony
+from . import cluster
 
 SWEEP_FILE = "sweep.json"
 SUMMARY_FILE = "summary.csv"

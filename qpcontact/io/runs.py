@@ -42,10 +42,10 @@ from typing import Any
 
 import numpy as np
 
+from ..colony.growth import Colony
 from ..errors import InvalidArgumentError, OutputFolderError
 from ..outputs import atomic_write, earlier_outputs, prepare_folder, write_text
-from .growth import Colony
-from .mechanics import CellMechanics
+from ..timestep.mechanics import CellMechanics
 from .snapshots import Snapshot, save_colony
 
 #: Columns of ``history.csv``, one row per step.

@@ -34,10 +34,10 @@ from typing import Any
 
 import numpy as np
 
+from ..colony.growth import Colony
 from ..errors import InvalidArgumentError
 from ..outputs import atomic_write, replacing
-from .growth import Colony
-from .mechanics import CellMechanics
+from ..timestep.mechanics import CellMechanics
 
 #: The arrays on every point and cell, in order.
 ARRAYS = ("axis", "length", "radius", "id", "parent_id", "growth_rate", "velocity", "cell_type")

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -47,10 +47,24 @@ from ..errors import InvalidArgumentError
 from ..geometry import Cells, Contacts, capsule_footprint, capsule_volume
 from ..geometry.cells import PLANAR_TOLERANCE
 from ..geometry.contacts import check_contacts
-from .growth import Colony
 
 #: The laws of :func:`pressure_growth_rate`.
 GROWTH_LAWS = ("linear", "exponential")
+
+
+class Lineage(Protocol):
+    """What the mechanics read of a colony (:class:`qpcontact.colony.Colony` is one; the per-step
+    calls import nothing from the colony model above them, docs/architecture.md): its cells, their
+    ids and their mothers' ids, and their growth rates [1/time]."""
+
+    @property
+    def cells(self) -> Cells: ...
+    @property
+    def ids(self) -> np.ndarray: ...
+    @property
+    def parent_ids(self) -> np.ndarray: ...
+    @property
+    def rates(self) -> np.ndarray: ...
 
 
 def _loads(cells: Cells, contacts: Contacts, forces: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -204,7 +218,7 @@ class CellMechanics:
             return cls.zero(n, planar)
         return cls(np.asarray(pressure, dtype=float), np.asarray(stress, dtype=float), planar)
 
-    def carried_over(self, before: Colony, after: Colony) -> CellMechanics:
+    def carried_over(self, before: Lineage, after: Lineage) -> CellMechanics:
         """These values (of ``before``'s cells) for the cells of ``after``: a cell keeps its own
         (matched by id), a newborn takes its mother's (a mother's stress is the mean over her
         volume; splitting her contacts between the daughters would leave out the force between
@@ -279,7 +293,7 @@ class PressureGrowth:
     def __post_init__(self) -> None:
         pressure_growth_rate(np.zeros(0), np.zeros(0), law=self.law, stall_pressure=self.stall_pressure)  # checks
 
-    def rates(self, colony: Colony, mechanics: CellMechanics) -> np.ndarray:
+    def rates(self, colony: Lineage, mechanics: CellMechanics) -> np.ndarray:
         """The rates of ``colony``'s cells for the next step."""
         return pressure_growth_rate(colony.rates, mechanics.pressure, law=self.law, stall_pressure=self.stall_pressure)
 

@@ -72,10 +72,10 @@ import numpy as np
 
 from ..arguments import positive_float
 from ..checks import number
+from ..colony.growth import Colony, volumes
 from ..errors import InvalidArgumentError, InvalidSnapshotError, OutputFolderError, QPContactError, RefusedPickleError
 from ..geometry import Cells
-from .growth import Colony, volumes
-from .mechanics import CellMechanics  # noqa: F401  (the snapshot's annotations, resolved here by the API reference)
+from ..timestep.mechanics import CellMechanics  # noqa: F401  (the snapshot's annotations, resolved here by the API reference)
 from .snapshots import Snapshot, npz_path, save_colony
 
 __all__ = ["CellModellerState", "CellState", "load_pickle", "read_cellmodeller", "run_pickles"]

@@ -32,10 +32,10 @@ from typing import IO, Any
 
 import numpy as np
 
+from ..colony.growth import Colony
 from ..errors import InvalidArgumentError, OutputFolderError
 from ..outputs import atomic_write
-from .growth import Colony
-from .mechanics import CellMechanics
+from ..timestep.mechanics import CellMechanics
 from .runs import HISTORY_FIELDS, RunFolder, latest_snapshot
 from .snapshots import Snapshot, load_snapshot
 

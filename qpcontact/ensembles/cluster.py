@@ -30,8 +30,8 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from .arguments import positive_int
-from .errors import InvalidArgumentError
+from ..arguments import positive_int
+from ..errors import InvalidArgumentError
 
 #: How to install Dask for qpcontact.
 INSTALL_HINT = "pip install 'qpcontact[sweep]'"
