@@ -18,6 +18,9 @@ settings) → :mod:`~qpcontact.ensembles` (sweeps on Dask). The studies
 top and are not imported here. docs/architecture.md describes the layout.
 """
 
+from typing import Any
+
+from . import moved
 from .assembly import ContactSystem, build_system
 from .colony import Colony, divide, expansion_time_step, grow, grow_position, growth_time_step
 from .errors import (
@@ -48,6 +51,8 @@ from .timestep import (
     step,
 )
 
+moved.install()  # the old paths of moved modules, for one release
+
 __version__ = "0.1.0"
 
 __all__ = [
@@ -61,3 +66,8 @@ __all__ = [
     "substrate",
 ]
 
+
+def __getattr__(name: str) -> Any:
+    """``qpcontact.cluster``, moved to :mod:`qpcontact.ensembles.cluster` (deprecated;
+    :mod:`qpcontact.moved`)."""
+    return moved.attribute(__name__, name, {})

@@ -19,7 +19,8 @@ from qpcontact import cli
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "qpcontact"
 #: The wings, lowest first: a module may import from its own wing and the ones before it.
-WINGS = ("geometry", "assembly", "solvers", "resolve", "colony", "studies")
+WINGS = ("geometry", "assembly", "solvers", "resolve", "timestep", "colony", "io", "simulation", "ensembles",
+         "studies")
 
 
 def _wing_of(module: str) -> str | None:
@@ -61,11 +62,94 @@ def test_no_wing_imports_from_a_higher_wing_or_the_top_level():
     assert not violations, "\n".join(violations)
 
 
+def test_the_per_timestep_calls_import_nothing_of_the_colony_runs_or_ensembles():
+    """The library calls of one step stand on their own: no import of theirs, at any depth
+    inside the package, reaches the colony model, what a run writes, the run loop or ensembles."""
+    paths = sorted((PACKAGE / "timestep").glob("*.py"))
+    assert {p.name for p in paths} >= {"position.py", "step.py", "mechanics.py"}
+    for path in paths:
+        above = [m for _, m in _imports(path) if _wing_of(m) in ("colony", "io", "simulation", "ensembles", "studies")]
+        assert not above, f"{path.relative_to(ROOT)} imports {above}"
+
+
 def test_the_layout_rule_is_checked_on_the_real_imports():
     """The check above would catch an upward import (guards the test itself)."""
     imports = dict((m, line) for line, m in _imports(PACKAGE / "resolve" / "resolve.py"))
     assert "qpcontact.solvers" in imports and "qpcontact.assembly.system" in imports
     assert _wing_of("qpcontact.studies.compare") == "studies" and _wing_of("qpcontact.errors") is None
+    # an upward import between the new wings is one (the run loop above the colony model)
+    assert WINGS.index(_wing_of("qpcontact.simulation.simulate")) > WINGS.index(_wing_of("qpcontact.colony.growth"))
+    assert WINGS.index(_wing_of("qpcontact.io.snapshots")) > WINGS.index(_wing_of("qpcontact.timestep.position"))
+
+
+#: Old path (before the layout by concern) -> the new home it must give, with a warning naming it.
+OLD_PATHS = {
+    "qpcontact.colony.run_colony": "qpcontact.simulation.run_colony",
+    "qpcontact.colony.position_step": "qpcontact.timestep.position_step",
+    "qpcontact.colony.load_colony": "qpcontact.io.load_colony",
+    "qpcontact.colony.Settings": "qpcontact.simulation.Settings",
+    "qpcontact.colony.PressureGrowth": "qpcontact.timestep.PressureGrowth",
+    "qpcontact.colony.colony_frame": "qpcontact.io.colony_frame",
+    "import qpcontact.colony.position": "qpcontact.timestep.position",
+    "import qpcontact.colony.simulate": "qpcontact.simulation.simulate",
+    "import qpcontact.colony.snapshots": "qpcontact.io.snapshots",
+    "import qpcontact.colony.sweep": "qpcontact.ensembles.sweep",
+    "from qpcontact.colony import plots": "qpcontact.io.plots",
+    "import qpcontact.cluster": "qpcontact.ensembles.cluster",
+    "from qpcontact import cluster": "qpcontact.ensembles.cluster",
+}
+
+_OLD_PATH_CHECK = """
+import importlib, json, sys, warnings
+import qpcontact
+old, new = sys.argv[1:]
+def resolve(path):
+    try:
+        return importlib.import_module(path)
+    except ImportError:
+        module, _, name = path.rpartition(".")
+        return getattr(importlib.import_module(module), name)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    if old.startswith(("import ", "from ")):
+        namespace = {}
+        exec(old, namespace)
+        value = namespace[old.split()[-1]] if old.startswith("from ") else sys.modules[old.split()[-1]]
+    else:
+        module, _, name = old.rpartition(".")
+        value = getattr(importlib.import_module(module), name)
+with warnings.catch_warnings():
+    warnings.simplefilter("error")
+    same = value is resolve(new)  # the new home does not warn
+print(json.dumps([same, [str(w.message) for w in caught if issubclass(w.category, DeprecationWarning)]]))
+"""
+
+
+@pytest.mark.parametrize("old", OLD_PATHS)
+def test_the_old_paths_work_and_warn_with_the_new_home(old):
+    """An old import path of a moved module or name gives the same object as its new home and
+    warns with a DeprecationWarning that names the new home; the new home does not warn (each in
+    a fresh interpreter: a module imported once is not imported again)."""
+    import json
+
+    new = OLD_PATHS[old]
+    out = subprocess.run([sys.executable, "-c", _OLD_PATH_CHECK, old, new], capture_output=True, text=True, cwd=ROOT)
+    assert out.returncode == 0, out.stderr
+    same, messages = json.loads(out.stdout)
+    assert same, f"{old} is not {new}"
+    assert len(messages) >= 1 and all(new in m for m in messages), messages
+
+
+def test_the_kept_names_of_the_colony_wing_do_not_warn():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        from qpcontact.colony import Colony, StepControl, divide, grow_position  # noqa: F401
+        from qpcontact.simulation import run_colony  # noqa: F401
+        from qpcontact.timestep import position_step  # noqa: F401
+    with pytest.raises(AttributeError, match="no_such_name"):
+        qc.colony.no_such_name  # noqa: B018  (an unknown name is still an AttributeError)
 
 
 def test_importing_qpcontact_leaves_out_the_studies_the_baselines_and_plotting():
@@ -276,7 +360,7 @@ def test_the_architecture_tree_lists_every_module_and_only_those():
     listed = architecture_tree()
     assert not modules - listed, f"modules missing from docs/architecture.md: {sorted(modules - listed)}"
     assert not listed - modules, f"docs/architecture.md lists modules that do not exist: {sorted(listed - modules)}"
-    assert {"qpcontact/described.py", "qpcontact/colony/settings.py", "qpcontact/colony/sweep.py"} <= listed
+    assert {"qpcontact/described.py", "qpcontact/simulation/settings.py", "qpcontact/ensembles/sweep.py"} <= listed
 
 
 def test_cli_lists_commands_and_rejects_unknown_ones(capsys):
@@ -340,7 +424,7 @@ def test_the_api_reference_builds_from_the_docstrings(tmp_path):
                           env=env, cwd=ROOT, timeout=300)
     assert done.returncode == 0 and not done.stderr, done.stderr
     assert (tmp_path / "index.html").exists()
-    for page in ("qpcontact.html", "qpcontact/colony/runs.html", "qpcontact/colony/snapshots.html",
-                 "qpcontact/colony/hooks.html", "qpcontact/resolve/resolve.html", "qpcontact/solvers/registry.html"):
+    for page in ("qpcontact.html", "qpcontact/io/runs.html", "qpcontact/io/snapshots.html",
+                 "qpcontact/timestep/position.html", "qpcontact/colony/hooks.html", "qpcontact/resolve/resolve.html", "qpcontact/solvers/registry.html"):
         assert (tmp_path / page).stat().st_size > 1000, page
-    assert "load_snapshot" in (tmp_path / "qpcontact" / "colony" / "snapshots.html").read_text()
+    assert "load_snapshot" in (tmp_path / "qpcontact" / "io" / "snapshots.html").read_text()

@@ -7,9 +7,15 @@
 
 Imports the per-timestep calls (:mod:`qpcontact.timestep`) and the wings below them only. The
 run loop and its settings are :mod:`qpcontact.simulation`, what a run writes and reads
-:mod:`qpcontact.io`, sweeps :mod:`qpcontact.ensembles` (docs/architecture.md).
+:mod:`qpcontact.io`, sweeps :mod:`qpcontact.ensembles` (docs/architecture.md). The names and
+submodules this package held before that layout (``qpcontact.colony.run_colony``,
+``qpcontact.colony.simulate``, ...) still work for this release and warn with a
+:class:`DeprecationWarning` naming their new home (:mod:`qpcontact.moved`).
 """
 
+from typing import Any
+
+from .. import moved
 from .growth import (
     Colony,
     daughters_share,
@@ -23,6 +29,12 @@ from .growth import (
     volumes,
 )
 from .hooks import StepControl, push
+
+
+def __getattr__(name: str) -> Any:
+    """The names that moved out of this package (deprecated; :mod:`qpcontact.moved`)."""
+    return moved.attribute(__name__, name, moved.COLONY_NAMES)
+
 
 __all__ = [
     "Colony", "StepControl", "daughters_share", "divide", "expansion_time_step", "grow", "grow_position",
