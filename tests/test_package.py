@@ -72,6 +72,28 @@ def test_the_per_timestep_calls_import_nothing_of_the_colony_runs_or_ensembles()
         assert not above, f"{path.relative_to(ROOT)} imports {above}"
 
 
+def _code_lines(function: ast.FunctionDef) -> int:
+    """Lines of a function's body, its docstring left out."""
+    body = function.body
+    if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant) \
+            and isinstance(body[0].value.value, str):
+        body = body[1:]
+    return body[-1].end_lineno - body[0].lineno + 1 if body else 0
+
+
+def test_no_function_of_the_run_loop_is_over_sixty_lines():
+    """The run loop reads as named phases, as position_step does (run_colony was 93 lines)."""
+    long = []
+    for path in sorted((PACKAGE / "simulation").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef) and _code_lines(node) > 60:
+                long.append(f"{path.relative_to(ROOT)}: {node.name} ({_code_lines(node)} lines)")
+    assert not long, long
+    run_colony = next(node for node in ast.walk(ast.parse((PACKAGE / "simulation" / "simulate.py").read_text()))
+                      if isinstance(node, ast.FunctionDef) and node.name == "run_colony")
+    assert 10 < _code_lines(run_colony) <= 60  # (the measure counts the code of a real function)
+
+
 def test_the_layout_rule_is_checked_on_the_real_imports():
     """The check above would catch an upward import (guards the test itself)."""
     imports = dict((m, line) for line, m in _imports(PACKAGE / "resolve" / "resolve.py"))

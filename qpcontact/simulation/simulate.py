@@ -379,99 +379,169 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     """
     from tqdm import tqdm  # the progress bar: only when a colony is run
 
-    colony, step, rng, extra = initial_state(settings, start)
-    check_types(settings, colony)
-    first_step = step
+    state = start_run(settings, start, frame_growth)
     if hook is None and settings.model.hook:
         hook = load_hook(settings.model.hook)
-    take_step = step_function(settings, extra)  # the run's one step function (swap it here)
+    take_step = step_function(settings, state.extra)  # the run's one step function (swap it here)
     if pressure_growth is None:
         pressure_growth = pressure_growth_of(settings)
-    model, target, snapshot_every = settings.model, settings.run.cells, settings.output.snapshot_every
-    planar = settings.run.dimensions == 2
-    stored = start.mechanics if isinstance(start, Snapshot) else None
-    # The cells' pressure and stress over the step that led to `colony` (saved with it).
-    mechanics = stored if stored is not None and stored.planar == planar else CellMechanics.zero(colony.cells.n, planar)
-    history: dict[str, list[float]] = {name: [] for name in HISTORY_FIELDS}
-    frames = [(colony.time, colony.cells)] if frame_growth else []
-    bar = tqdm(total=target, initial=colony.cells.n, unit="cell", disable=not progress, file=sys.stderr)
-    error, saved = "", -1
-    exception: BaseException | None = None
-
-    def save() -> None:
-        nonlocal saved
-        if folder is not None and saved != step:
-            folder.save_snapshot(colony, step, settings=settings.to_tables(), rng=rng, extra=extra,
-                                 mechanics=mechanics)
-            saved = step
-
+    bar = tqdm(total=settings.run.cells, initial=state.colony.cells.n, unit="cell", disable=not progress,
+               file=sys.stderr)
     t_start = time.perf_counter()
     with Interrupt() as interrupt:
-        while colony.cells.n < target and step < settings.run.max_steps and not interrupt.requested:
-            where = f"step {step} (t = {colony.time:.4g}, {colony.cells.n} cells)"
-            rng_state, extra_before = rng.bit_generator.state, dict(extra)
+        while state.colony.cells.n < settings.run.cells and state.step < settings.run.max_steps \
+                and not interrupt.requested:
             t0 = time.perf_counter()
-            try:
-                with interrupt.armed():  # a signal now abandons the step: nothing of it is applied
-                    control = apply_hook(hook, colony, step, mechanics)
-                    current = colony if control.colony is None else control.colony
-                    # Division first, so that the overlap its axis noise makes is cleared by this
-                    # step's contact solve: every state the run saves or returns is one a step
-                    # ended in (issue 19: dividing after the step left 0.047 of a diameter in the
-                    # snapshots of a run whose steps keep 0.01).
-                    divided = divide(current, model.division_length if control.division_length is None
-                                     else control.division_length, rng, axis_noise=model.axis_noise,
-                                     rate_noise=model.rate_noise, base_rate=model.rate, planar=planar,
-                                     type_rates=model.type_rates or None)
-                    stepping = divided
-                    if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
-                        felt = mechanics if current is colony else mechanics.carried_over(colony, current)
-                        if divided is not current:  # a daughter feels her mother's pressure
-                            felt = felt.carried_over(current, divided)
-                        stepping = divided.replace(rates=pressure_growth.rates(divided, felt))
-                    dt = settings.time_step_of(stepping)
-                    drive = push(divided, [0.0, 0.0, -model.sink_speed]) if not planar and model.sink_speed else None
-                    if control.drive is not None:
-                        shared = daughters_share(control.drive, current, divided)
-                        drive = shared if drive is None else drive + shared
-                    outcome = take_step(stepping, dt, drive=drive)
-                    if stepping is not divided:
-                        outcome = outcome._replace(colony=outcome.colony.replace(rates=divided.rates))
-                    felt_now = step_mechanics(outcome, settings)
-            except KeyboardInterrupt:
-                rng.bit_generator.state = rng_state
-                extra.clear()
-                extra.update(extra_before)
-                interrupt.signal = interrupt.signal or signal.SIGINT  # Python's own (outside the main thread)
+            stepped = attempt_step(state, settings, interrupt, hook, pressure_growth, take_step)
+            if stepped is None:
                 break
-            except ModelHookError as exc:
-                error, exception = f"{where}: {exc}", exc
-                break
-            except SolverFailedError as exc:
-                error, exception = f"{where}: contact solve failed, not applied: {exc}", exc
-                break
-            except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
-                error, exception = f"{where}: step not applied: {exc}", exc
-                break
-            colony, mechanics = outcome.colony, felt_now
-            row = history_row(step, colony, outcome, time.perf_counter() - t0, felt_now)
-            for name in HISTORY_FIELDS:
-                history[name].append(row[name])
-            if folder is not None:
-                folder.append_history(row)
-            step += 1
-            bar.update(colony.cells.n - bar.n)
-            bar.set_postfix(t=f"{colony.time:.2f}", overlap=f"{outcome.result.max_overlap:.3f}", refresh=False)
-            if snapshot_every and step % snapshot_every == 0:
-                save()
-            if frame_growth and colony.cells.n >= frame_growth * frames[-1][1].n:
-                frames.append((colony.time, colony.cells))
+            record_step(state, *stepped, time.perf_counter() - t0, settings, folder, bar, frame_growth)
         bar.close()
         wall = time.perf_counter() - t_start
-        save()  # the state reached, whatever ended the run
-    if frame_growth and frames[-1][1] is not colony.cells:
-        frames.append((colony.time, colony.cells))
-    return Run(colony, history, wall, step, error, frames, first_step, interrupt.signal, exception, mechanics)
+        save_state(state, settings, folder)  # the state reached, whatever ended the run
+    if frame_growth and state.frames[-1][1] is not state.colony.cells:
+        state.frames.append((state.colony.time, state.colony.cells))
+    return Run(state.colony, state.history, wall, state.step, state.error, state.frames, state.first_step,
+               interrupt.signal, state.exception, state.mechanics)
+
+
+@dataclass
+class RunState:
+    """A run in progress, what the phases of :func:`run_colony` read and advance.
+
+    Attributes:
+        colony: the state reached.
+        step: the index of the next step (steps from the founder, earlier runs included).
+        rng: the run's random generator (divisions).
+        extra: the step function's extra arrays (saved in snapshots; the same dict the step
+            function holds).
+        mechanics: the cells' pressure and stress over the step that led to ``colony`` (saved
+            with it).
+        history: this call's rows by column (:data:`HISTORY_FIELDS`).
+        frames: ``(time, cells)`` frames for an animation.
+        first_step: the step index the call started from.
+        saved: the step index of the last snapshot written (-1: none).
+        error, exception: why the run stopped early (:func:`attempt_step`).
+    """
+
+    colony: Colony
+    step: int
+    rng: np.random.Generator
+    extra: dict[str, np.ndarray]
+    mechanics: CellMechanics
+    history: dict[str, list[float]]
+    frames: list[tuple[float, Cells]]
+    first_step: int
+    saved: int = -1
+    error: str = ""
+    exception: BaseException | None = None
+
+
+def start_run(settings: Settings, start: Colony | Snapshot | None, frame_growth: float) -> RunState:
+    """The state a run starts from (:func:`initial_state`), its cell types checked, with the
+    stored mechanics of a snapshot (zero for a colony, or a snapshot of the other dimension)."""
+    colony, step, rng, extra = initial_state(settings, start)
+    check_types(settings, colony)
+    planar = settings.run.dimensions == 2
+    stored = start.mechanics if isinstance(start, Snapshot) else None
+    mechanics = stored if stored is not None and stored.planar == planar else CellMechanics.zero(colony.cells.n, planar)
+    return RunState(colony, step, rng, extra, mechanics, {name: [] for name in HISTORY_FIELDS},
+                    [(colony.time, colony.cells)] if frame_growth else [], first_step=step)
+
+
+def save_state(state: RunState, settings: Settings, folder: RunFolder | None) -> None:
+    """A snapshot of the state reached into ``folder`` (once per step index)."""
+    if folder is not None and state.saved != state.step:
+        folder.save_snapshot(state.colony, state.step, settings=settings.to_tables(), rng=state.rng, extra=state.extra,
+                             mechanics=state.mechanics)
+        state.saved = state.step
+
+
+def prepare_step(state: RunState, settings: Settings, hook: Hook | None,
+                 pressure_growth: PressureGrowth | None) -> tuple[Colony, Colony, float, np.ndarray | None]:
+    """What the next step starts from: the model hook's control, the division, the rates slowed
+    by pressure, the time step and the drive. ``(divided, stepping, dt, drive)``: ``stepping``
+    is ``divided`` with this step's rates (the colony keeps its own)."""
+    colony, mechanics, model, planar = state.colony, state.mechanics, settings.model, settings.run.dimensions == 2
+    control = apply_hook(hook, colony, state.step, mechanics)
+    current = colony if control.colony is None else control.colony
+    # Division first, so that the overlap its axis noise makes is cleared by this
+    # step's contact solve: every state the run saves or returns is one a step
+    # ended in (issue 19: dividing after the step left 0.047 of a diameter in the
+    # snapshots of a run whose steps keep 0.01).
+    divided = divide(current, model.division_length if control.division_length is None
+                     else control.division_length, state.rng, axis_noise=model.axis_noise,
+                     rate_noise=model.rate_noise, base_rate=model.rate, planar=planar,
+                     type_rates=model.type_rates or None)
+    stepping = divided
+    if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
+        felt = mechanics if current is colony else mechanics.carried_over(colony, current)
+        if divided is not current:  # a daughter feels her mother's pressure
+            felt = felt.carried_over(current, divided)
+        stepping = divided.replace(rates=pressure_growth.rates(divided, felt))
+    dt = settings.time_step_of(stepping)
+    drive = push(divided, [0.0, 0.0, -model.sink_speed]) if not planar and model.sink_speed else None
+    if control.drive is not None:
+        shared = daughters_share(control.drive, current, divided)
+        drive = shared if drive is None else drive + shared
+    return divided, stepping, dt, drive
+
+
+def take_one_step(state: RunState, settings: Settings, hook: Hook | None, pressure_growth: PressureGrowth | None,
+                  take_step: StepFunction) -> tuple[StepOutcome, CellMechanics]:
+    """The next step (:func:`prepare_step`, then the step function): its outcome, with the
+    colony's own rates, and the mechanics of the state it ends in (:func:`step_mechanics`)."""
+    divided, stepping, dt, drive = prepare_step(state, settings, hook, pressure_growth)
+    outcome = take_step(stepping, dt, drive=drive)
+    if stepping is not divided:
+        outcome = outcome._replace(colony=outcome.colony.replace(rates=divided.rates))
+    return outcome, step_mechanics(outcome, settings)
+
+
+def attempt_step(state: RunState, settings: Settings, interrupt: Interrupt, hook: Hook | None,
+                 pressure_growth: PressureGrowth | None,
+                 take_step: StepFunction) -> tuple[StepOutcome, CellMechanics] | None:
+    """:func:`take_one_step`, or None when the run ends here with nothing of the step applied:
+    a signal (the random generator and the extra arrays put back as they were), or a failing
+    model hook, contact solve or step (``state.error`` and ``state.exception`` set)."""
+    where = f"step {state.step} (t = {state.colony.time:.4g}, {state.colony.cells.n} cells)"
+    rng_state, extra_before = state.rng.bit_generator.state, dict(state.extra)
+    try:
+        with interrupt.armed():  # a signal now abandons the step: nothing of it is applied
+            return take_one_step(state, settings, hook, pressure_growth, take_step)
+    except KeyboardInterrupt:
+        state.rng.bit_generator.state = rng_state
+        state.extra.clear()
+        state.extra.update(extra_before)
+        interrupt.signal = interrupt.signal or signal.SIGINT  # Python's own (outside the main thread)
+    except ModelHookError as exc:
+        state.error, state.exception = f"{where}: {exc}", exc
+    except SolverFailedError as exc:
+        state.error, state.exception = f"{where}: contact solve failed, not applied: {exc}", exc
+    except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
+        state.error, state.exception = f"{where}: step not applied: {exc}", exc
+    return None
+
+
+def record_step(state: RunState, outcome: StepOutcome, mechanics: CellMechanics, seconds: float, settings: Settings,
+                folder: RunFolder | None, bar: Any, frame_growth: float) -> None:
+    """A step taken: the state advanced, its history row kept (and appended to ``folder``), the
+    progress bar, a snapshot every ``snapshot_every`` steps, a frame when the colony has grown
+    by ``frame_growth``."""
+    state.colony, state.mechanics = outcome.colony, mechanics
+    row = history_row(state.step, state.colony, outcome, seconds, mechanics)
+    for name in HISTORY_FIELDS:
+        state.history[name].append(row[name])
+    if folder is not None:
+        folder.append_history(row)
+    state.step += 1
+    bar.update(state.colony.cells.n - bar.n)
+    bar.set_postfix(t=f"{state.colony.time:.2f}", overlap=f"{outcome.result.max_overlap:.3f}", refresh=False)
+    snapshot_every = settings.output.snapshot_every
+    if snapshot_every and state.step % snapshot_every == 0:
+        save_state(state, settings, folder)
+    if frame_growth and state.colony.cells.n >= frame_growth * state.frames[-1][1].n:
+        state.frames.append((state.colony.time, state.colony.cells))
 
 
 # ------------------------------------------------------------------------------------------
