@@ -73,3 +73,12 @@ class OutputFolderError(QPContactError, OSError):
 class ModelHookError(QPContactError, RuntimeError):
     """A colony run's model hook (:mod:`qpcontact.colony.hooks`) raised, or returned something it
     cannot use; the hook's own exception, if any, is the ``__cause__``."""
+
+
+class PullingImpulseWarning(UserWarning):
+    """The plain linear solve (``solver="linear"``, :func:`qpcontact.solvers.solve_min_norm`)
+    returned contact impulses that pull (``λ_k < 0``): every contact of its all-active system is
+    held at ``Mx = b``, including those a real contact would let go. Its answer is then no
+    physical resolution, only the all-active solve; it is a check of a QP answer only where every
+    contact pushes (:func:`qpcontact.compare_with_linear`). The result says so too
+    (``Result.pulling``)."""

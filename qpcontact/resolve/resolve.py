@@ -14,7 +14,7 @@ from ..checks import flag, instance, mapping, number
 from ..errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
 from ..geometry.cells import Cells
 from ..geometry.contacts import Contacts, check_contacts, colliding, find_contacts
-from ..solvers import FORMS, FORMULATIONS, Problem, get_solver, solve, solve_min_norm
+from ..solvers import FORMS, FORMULATIONS, LinearSolution, Problem, get_solver, solve, solve_min_norm
 from ..solvers.registry import check_options
 from . import metrics
 
@@ -68,6 +68,12 @@ class Result:
         message: why the result is not converged, if it is not.
         system: the assembled system (None when nothing collided).
         scaled_solution: the scaled unknowns ``ỹ`` (for comparisons).
+        pulling: how many contact impulses pull (``λ_k < 0``); only the plain solve
+            (``solver="linear"``) gives them, and warns
+            (:class:`~qpcontact.errors.PullingImpulseWarning`): its all-active answer is then no
+            physical resolution.
+        linear_solution: the plain linear solve of ``system``, once :func:`compare_with_linear`
+            has computed it (kept so that a second comparison does not solve again).
     """
 
     impulses: np.ndarray
@@ -88,6 +94,8 @@ class Result:
     message: str = ""
     system: ContactSystem | None = field(default=None, repr=False)
     scaled_solution: np.ndarray | None = field(default=None, repr=False)
+    pulling: int = 0
+    linear_solution: LinearSolution | None = field(default=None, repr=False, compare=False)
 
     def summary(self) -> str:
         """One line: solver, status, contacts, unknowns, time, penetration."""
@@ -448,6 +456,7 @@ def resolve(
         message=solution.message,
         system=system,
         scaled_solution=y,
+        pulling=int(solution.extras.get("pulling", 0)),
     )
     if not converged and on_failure == "raise":
         raise SolverFailedError(f"{solver}/{formulation}: {solution.message}", result)
