@@ -109,6 +109,25 @@ def test_simulate_runs_a_model_file_and_saves_it_in_the_settings(tmp_path, capsy
     assert "nosuch.py: no such file" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("command", ["simulate", "sweep"])
+@pytest.mark.parametrize(("source", "error"), [
+    ("def hook(colony, step:\n    pass\n", "line 1: SyntaxError"),
+    ("import numpy\nimport no_such_module_for_qpcontact\n", "line 2: ModuleNotFoundError"),
+    ("raise RuntimeError('my model does not load')\n", "line 1: RuntimeError: my model does not load"),
+])
+def test_a_hook_that_does_not_load_is_one_line_and_exit_2(tmp_path, capsys, command, source, error):
+    """docs/colony.md: a model hook that does not load is exit status 2 and one line, no
+    traceback, before anything is written."""
+    model = tmp_path / "model.py"
+    model.write_text(source)
+    out = tmp_path / "out"
+    assert main([command, "--hook", str(model), "--cells", "3", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert f"model {model}: does not load: {error}" in err
+    assert not out.exists()
+
+
 def test_a_dividing_mother_gives_each_daughter_half_her_hook_drive():
     """The hook's drive is per cell of the colony it was given; division now comes after the
     hook, at the start of the step: each daughter gets half her mother's row (a push m·v then
