@@ -663,9 +663,20 @@ def report(sweep: Sweep) -> str:
     lines = [f"{len(sweep.runs)} runs: {counts['done']} done, {counts['failed']} failed, {counts['pending']} not finished"]
     for run in sweep.runs:
         if run["status"] != "done":
-            error = str(run.get("error") or "not started").splitlines()
+            error = str(run.get("error") or progress_of(sweep.folder(run))).splitlines()
             lines.append(f"  {run['status']}: {run['name']}: {error[-1] if error else ''}")
     return "\n".join(lines)
+
+
+def progress_of(folder: Path) -> str:
+    """What a run not finished and without an error got to, from its folder: ``"not started"``,
+    or ``"started, cut short; its latest snapshot: step N"`` (what ``--resume`` continues from;
+    a run stopped before its first snapshot starts again)."""
+    if not attempts_of(folder):
+        return "not started"
+    latest = RunFolder(folder).latest_snapshot()
+    return "started, cut short; " + ("no snapshot yet" if latest is None else
+                                     f"its latest snapshot: step {int(latest.stem.split('_')[-1])}")
 
 
 # ------------------------------------------------------------------------------------------
