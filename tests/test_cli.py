@@ -17,6 +17,11 @@ BAD_COMMAND_LINES = [
     ["demo", "--seed", "-1"],
     ["demo", "--cells", "0"],
     ["demo", "--tolerance", "abc"],
+    ["demo", "--tolerance", "5"],  # a tolerance is in (0, 1): refused up front, not by every solve
+    ["demo", "--tolerance", "1"],
+    ["compare", "--tolerances", "1e-3,2"],
+    ["bench", "--tolerance", "1.5"],
+    ["bench", "--solvers", "osqp@2"],
     ["simulate", "--seed", "-1"],
     ["simulate", "--snapshot-every", "-1"],
     ["simulate", "--cells", "2.5"],

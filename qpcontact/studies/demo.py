@@ -12,7 +12,8 @@ import argparse
 import time
 from pathlib import Path
 
-from ..arguments import non_negative_int, positive_float, positive_int, run_standalone
+from ..arguments import non_negative_int, positive_int, run_standalone
+from ..arguments import tolerance as tolerance_type
 from ..assembly import build_system
 from ..errors import QPContactError
 from ..geometry import colliding, find_contacts
@@ -66,7 +67,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dimensions", type=int, choices=(2, 3), default=2,
                         help="2: a monolayer; 3: a biofilm (default: 2)")
     parser.add_argument("--seed", type=non_negative_int, default=0, help="random seed of the scene (default: 0)")
-    parser.add_argument("--tolerance", type=positive_float, default=1e-6,
+    parser.add_argument("--tolerance", type=tolerance_type, default=1e-6,
                         help="solver tolerance [dimensionless, scaled units] (default: 1e-6)")
     parser.add_argument("--out", type=Path, default=None, metavar="FOLDER",
                         help="also write the table (Markdown) to FOLDER/demo.md (default: print only)")
