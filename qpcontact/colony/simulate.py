@@ -298,6 +298,24 @@ def check_target(settings: Settings, colony: Colony, hook: Any) -> None:
             "hook that sets growth rates")
 
 
+def flags_to_try(settings: Settings) -> str:
+    """What to change when a run's step fails, as the flags of ``qpcontact simulate`` (and TOML
+    keys) with their current values: the end of a failed run's message."""
+    run = settings.run
+    smaller = (f"--growth-per-step {run.growth_per_step / 2:g}" if settings.time_step_rule() == "growth"
+               else f"--max-dt {run.max_dt / 2:g}")
+    if run.step == "position":
+        p = settings.position
+        return (f"To try: smaller steps ({smaller}, or --max-halvings {run.max_halvings + 2}: each failed step "
+                f"is retried with half the step that many times), more linearizations (--position-max-iterations "
+                f"{2 * p.max_iterations}), a looser --position-tolerance (now {p.tolerance:g}) or "
+                f"--position-overlap-tolerance (now {p.overlap_tolerance:g}), or another --position-solver (now "
+                f"{p.solver}: {'mprgp or clarabel' if p.solver == 'ipm' else 'ipm'}); continue with --resume")
+    v = settings.velocity
+    return (f"To try: smaller steps ({smaller}), a looser --velocity-tolerance (now {v.tolerance:g}), or another "
+            f"--velocity-solver (now {v.solver}); continue with --resume")
+
+
 def initial_state(settings: Settings, start: Colony | Snapshot | None) -> tuple[Colony, int, np.random.Generator,
                                                                                    dict[str, np.ndarray]]:
     """``(colony, step index, random generator, extra state)`` a run starts from: the founder,
@@ -469,7 +487,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
                 error, exception = f"{where}: {exc}", exc
                 break
             except SolverFailedError as exc:
-                error, exception = f"{where}: contact solve failed, not applied: {exc}", exc
+                error, exception = f"{where}: contact solve failed, not applied: {exc}. {flags_to_try(settings)}", exc
                 break
             except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
                 error, exception = f"{where}: step not applied: {exc}", exc

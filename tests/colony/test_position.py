@@ -263,6 +263,9 @@ def test_an_answer_the_solver_did_not_stand_by_is_never_applied(monkeypatch):
     with pytest.raises(StepFailedError, match="stalled") as caught:
         position_step(cells, 0.05, drive=growing(cells))
     assert not caught.value.result.converged
+    # ... and says what to try, with the settings' values (issue 27: "stalled" and nothing else).
+    assert ("try: a smaller dt" in str(caught.value) and "max_iterations, now 30" in str(caught.value)
+            and "solver, now ipm: mprgp or clarabel" in str(caught.value))
 
 
 def test_an_update_that_throws_cells_into_each_other_is_backtracked(monkeypatch):

@@ -345,3 +345,23 @@ def test_the_documented_exit_statuses_are_the_codes():
     text = (Path(__file__).resolve().parents[2] / "docs" / "colony.md").read_text()
     assert "130 for\n  Ctrl-C (SIGINT), 143 for SIGTERM" in text or "130 for Ctrl-C (SIGINT), 143 for SIGTERM" in text
     assert "3 short of `--cells` at `--max-steps`" in text and simulate.EXIT_SHORT == 3
+
+
+def test_a_failed_step_ends_the_run_saying_what_to_try(tmp_path, monkeypatch, capsys):
+    """A run whose step fails (here: every solve of the position step stalls) says which flags to
+    change, with their values, and how to continue (issue 27: it said "stalled" and nothing else)."""
+    import dataclasses
+
+    from qpcontact.cli import main
+    from qpcontact.colony import position
+
+    real = position.solve
+    monkeypatch.setattr(position, "solve", lambda *a, **k: dataclasses.replace(real(*a, **k), found=False,
+                                                                               status="stalled"))
+    assert main(["simulate", "--cells", "8", "--out", str(tmp_path / "run"), "--quiet"]) == 1
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "stalled" in last and "To try: smaller steps (--growth-per-step 0.025, or --max-halvings 5" in last
+    assert "--position-max-iterations 60" in last and "--position-solver (now ipm: mprgp or clarabel)" in last
+    assert last.endswith("continue with --resume")
+    settings = simulate.Settings().updated({"step": "velocity"})
+    assert "--velocity-tolerance (now 1e-06)" in simulate.flags_to_try(settings)
