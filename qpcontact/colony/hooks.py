@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidArgumentError, ModelHookError
-from .growth import Colony
+from .growth import Colony, check_division_length
 from .mechanics import CellMechanics
 
 
@@ -139,6 +139,10 @@ def apply_hook(hook: Hook | None, colony: Colony, step: int, mechanics: CellMech
         if length.shape not in ((), (n,)) or not np.all(np.isfinite(length) & (length > 0)):
             raise ModelHookError(f"model hook at step {step}: division_length must be a number or an ({n},) "
                                        "array, finite and > 0")
+        try:  # the check of divide and of simulate's settings: daughters of a positive length
+            check_division_length(length, control.colony.cells.radii)
+        except InvalidArgumentError as exc:
+            raise ModelHookError(f"model hook at step {step}: {exc}") from None
         control.division_length = length
     return control
 

@@ -54,7 +54,7 @@ from ..described import Layer, Setting, check_fields, documented, setting, setti
 from ..errors import InvalidArgumentError
 from ..geometry.surfaces import Plane, substrate
 from ..solvers import FORMS, QP_FORMULATIONS, get_solver
-from .growth import Colony, expansion_time_step, growth_time_step
+from .growth import Colony, check_division_length, expansion_time_step, growth_time_step
 from .mechanics import GROWTH_LAWS
 from .position import PositionSettings
 from .runs import read_toml
@@ -113,11 +113,7 @@ class ModelSettings:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        if not self.division_length > 2.0 * self.radius:
-            raise InvalidArgumentError(
-                f"division_length: must exceed 2 × radius = {2 * self.radius:g} µm (daughters are born at "
-                f"division_length/2 − radius = {self.division_length / 2 - self.radius:g} µm), got "
-                f"{self.division_length:g}")
+        check_division_length(self.division_length, self.radius)  # the check of divide, too
 
     def cycle_time(self) -> float:
         """The time a cell growing freely at ``rate`` takes from birth to division [doubling

@@ -83,6 +83,7 @@ def test_a_hook_may_return_a_colony_or_none():
     (lambda colony: 3, "returned int; expected None, a Colony or a StepControl"),
     (lambda colony: StepControl(drive=np.zeros((colony.cells.n, 6))), r"drive must be a finite \(1, 7\) array"),
     (lambda colony: StepControl(division_length=-1.0), "division_length must be a number"),
+    (lambda colony: StepControl(division_length=0.9), r"division_length: must exceed 2 × radius = 1 µm"),
     (lambda colony: 1 / 0, "raised ZeroDivisionError: division by zero"),
 ])
 def test_a_bad_hook_stops_the_run_with_a_named_error_and_the_state_saved(tmp_path, answer, message):
