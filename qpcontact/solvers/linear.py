@@ -253,10 +253,11 @@ def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, t
     status = f"solved ({lin.method}{'' if lin.consistent else ', least squares'})"
     pulling = pulling_contacts(lin.lam)
     if pulling:
-        warnings.warn(f"the plain linear solve pulls at {pulling} of {lin.lam.size} contacts (most negative impulse "
-                      f"{float(lin.lam.min()):.3g}, scaled): its all-active answer is no physical resolution, only a "
-                      "check where every contact pushes; use a QP solver (e.g. solver='clarabel')",
-                      PullingImpulseWarning, stacklevel=5)  # the caller of resolve
+        # One text (the count is in the status and Result.pulling), so that Python's default
+        # filter says it once per place, not once per step of a loop.
+        warnings.warn("the plain linear solve's answer pulls at some contacts (Result.pulling: how many): its "
+                      "all-active answer is no physical resolution, only a check where every contact pushes; use a "
+                      "QP solver (e.g. solver='clarabel')", PullingImpulseWarning, stacklevel=5)  # resolve's caller
         status += f", pulls at {pulling} contacts"
     return SolverOutput(lin.y, lin.lam, True, status, lin.iterations, 0.0, lin.seconds,
                         extras={"condition_estimate": lin.condition_estimate, "consistent": lin.consistent,
