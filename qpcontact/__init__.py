@@ -26,6 +26,7 @@ from .colony import Colony, divide, expansion_time_step, grow, grow_position, gr
 from .errors import (
     InvalidArgumentError,
     InvalidCellsError,
+    PullingImpulseWarning,
     QPContactError,
     SolverFailedError,
     SolverNotInstalledError,
@@ -57,7 +58,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "FORMS", "FORMULATIONS", "Agreement", "CellMotion", "Cells", "Colony", "ContactImpulses", "PositionSettings",
-    "PositionStepResult", "StepFailedError", "grow_position", "growth_time_step", "position_step", "ContactSystem", "Contacts", "InvalidArgumentError",
+    "PositionStepResult", "StepFailedError", "grow_position", "growth_time_step", "position_step", "ContactSystem", "Contacts", "InvalidArgumentError", "PullingImpulseWarning",
     "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
     "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
     "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",

@@ -5,7 +5,7 @@ the common flags.
   exit status 2 (never a traceback, never the whole usage);
 - value types that reject what no run can use, each naming the flag and the value:
   :func:`positive_int`, :func:`non_negative_int`, :func:`positive_float`,
-  :func:`non_negative_float`, :func:`comma_list` (comma-separated lists, the one list syntax of
+  :func:`non_negative_float`, :func:`tolerance`, :func:`comma_list` (comma-separated lists, the one list syntax of
   every command), :func:`on_off`, :func:`output_folder`;
 - :func:`add_output_arguments`: ``--out`` (a folder, by default ``./<command>-out/``) and
   ``--overwrite``;
@@ -66,6 +66,19 @@ def non_negative_int(text: str) -> int:
 def positive_float(text: str) -> float:
     """A finite number > 0."""
     return float(_number(text, float, 0, strict=True))
+
+
+def tolerance(text: str) -> float:
+    """A solver tolerance: a number in (0, 1), as the library's ``tolerance`` arguments take
+    (:func:`qpcontact.solvers.check_options`), so that a command refuses what every solve of it
+    would refuse, up front."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 < value < 1:  # NaN too
+        raise argparse.ArgumentTypeError(f"must be a number in (0, 1), got {text!r}")
+    return value
 
 
 def non_negative_float(text: str) -> float:

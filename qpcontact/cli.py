@@ -4,7 +4,8 @@ Each sub-command is a module with ``add_arguments(parser)`` and ``run_command(ar
 (:mod:`qpcontact.arguments`); only the module of the command given is imported, so a missing
 optional dependency of one job does not break the others, and ``qpcontact --help`` lists them
 all. Exit status: 0 done; 1 the job failed (a solver, a step); 2 a bad command line (one line on
-stderr); 128 + N stopped by signal N after saving what was done (130 for Ctrl-C). ``qpcontact``
+stderr); 3 a ``simulate`` run that stopped at ``--max-steps`` short of ``--cells``; 128 + N stopped
+by signal N after saving what was done (130 for Ctrl-C, 143 for SIGTERM). ``qpcontact``
 without a command prints the help on stderr and exits with 2.
 """
 

@@ -1,6 +1,8 @@
 """Exceptions raised by qpcontact.
 
 Every error a user can trigger derives from :class:`QPContactError`, and also from the builtin
+
+
 class that fits it (``ValueError`` for bad input, ``ImportError`` for a missing backend,
 ``RuntimeError`` for a solver that did not deliver), so ``except ValueError`` keeps working.
 """
@@ -80,3 +82,12 @@ class RefusedPickleError(InvalidSnapshotError):
     not have, which is then neither built nor called (loading a pickle can run any code its
     author put in it; :func:`qpcontact.io.cellmodeller.load_pickle` builds only what a
     CellModeller state holds). The message names what it asked for."""
+
+
+class PullingImpulseWarning(UserWarning):
+    """The plain linear solve (``solver="linear"``, :func:`qpcontact.solvers.solve_min_norm`)
+    returned contact impulses that pull (``λ_k < 0``): every contact of its all-active system is
+    held at ``Mx = b``, including those a real contact would let go. Its answer is then no
+    physical resolution, only the all-active solve; it is a check of a QP answer only where every
+    contact pushes (:func:`qpcontact.compare_with_linear`). The result says so too
+    (``Result.pulling``)."""

@@ -80,3 +80,14 @@ def test_the_cellmodeller_patch_guards_the_renderer(tmp_path):
     text = target.read_text()
     assert "    if sim.is_gui:" in text and "\n        from CellModeller.GUI import Renderers" in text
     assert "#if sim.is_gui" not in text
+
+
+def test_the_plain_solve_timing_runs_on_a_snapshot(tmp_path):
+    from qpcontact.cli import main
+
+    assert main(["simulate", "--cells", "40", "--out", str(tmp_path / "run"), "--quiet"]) == 0
+    snapshot = sorted((tmp_path / "run" / "snapshots").glob("step_*.npz"))[-1]
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "linear_grown.py"), str(snapshot), "--margin", "0.1"],
+                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert "| cholesky |" in done.stdout and "| lsmr |" in done.stdout and "compare_with_linear" in done.stdout

@@ -5,7 +5,9 @@ outputs in ./<command>-out unless asked otherwise."""
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import re
+import shlex
 from pathlib import Path
 
 import pytest
@@ -17,6 +19,11 @@ BAD_COMMAND_LINES = [
     ["demo", "--seed", "-1"],
     ["demo", "--cells", "0"],
     ["demo", "--tolerance", "abc"],
+    ["demo", "--tolerance", "5"],  # a tolerance is in (0, 1): refused up front, not by every solve
+    ["demo", "--tolerance", "1"],
+    ["compare", "--tolerances", "1e-3,2"],
+    ["bench", "--tolerance", "1.5"],
+    ["bench", "--solvers", "osqp@2"],
     ["simulate", "--seed", "-1"],
     ["simulate", "--snapshot-every", "-1"],
     ["simulate", "--cells", "2.5"],
@@ -120,3 +127,103 @@ def test_list_flags_are_comma_separated():
     args = parsers()["stability"].parse_args(["--scaling", "on,off"])
     assert args.scaling == [True, False]
     assert parsers()["compare"].parse_args(["--tolerances", "1e-3, 1e-6"]).tolerances == [1e-3, 1e-6]
+
+
+# ------------------------------------------------------------------------------------------
+# The command lines the documents give (issue 27, item 6: docs that cannot drift)
+# ------------------------------------------------------------------------------------------
+ROOT = Path(__file__).resolve().parents[1]
+DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+#: Command lines a document quotes *because* they are refused now (history), each with where.
+QUOTED_AS_REFUSED = {
+    "qpcontact simulate --cells 10000 --solver osqp --tolerance 1e-3": "docs/colony.md, the 10k growth run (historical)",
+}
+#: Words a document's own example defines before its command lines use them, and what stands in.
+DEFINED_BY_THE_DOCUMENT = {"--solvers pgs": "--solvers linear"}  # docs/architecture.md registers "pgs"
+
+
+def documented_command_lines(text: str) -> list[str]:
+    """Every ``qpcontact ...`` command line of a Markdown text: the lines of its code blocks
+    (continued with a backslash, comments dropped) and its inline code spans."""
+    lines = []
+    for block in re.findall(r"```[a-z]*\n(.*?)```", text, re.S):
+        for line in re.sub(r"\\\n\s*", " ", block).splitlines():
+            line = line.strip().removeprefix("$ ")
+            if line.startswith("qpcontact "):
+                lines.append(line.split(" #")[0].strip())
+    prose = re.sub(r"```.*?```", "", text, flags=re.S).replace("\n", " ")
+    lines += [re.sub(r"\s+", " ", span).strip() for span in re.findall(r"`(qpcontact [a-z][^`]*)`", prose)]
+    return lines
+
+
+def all_documented_command_lines() -> dict[str, str]:
+    """command line -> the first document that gives it."""
+    found: dict[str, str] = {}
+    for document in DOCUMENTS:
+        for line in documented_command_lines(document.read_text()):
+            found.setdefault(line, document.name)
+    return found
+
+
+def test_the_documents_command_lines_are_found():
+    found = all_documented_command_lines()
+    assert len(found) > 40
+    assert "qpcontact simulate --pressure-growth linear --stall-pressure 40" in found  # a code block
+    assert "qpcontact bench --quick" in found
+    assert set(QUOTED_AS_REFUSED) <= set(found)
+
+
+@pytest.mark.parametrize("line", sorted(all_documented_command_lines()))
+def test_every_documented_command_line_is_accepted_by_its_parser(line, capsys):
+    """Every flag and value of every command line in README.md and docs/*.md parses (a renamed
+    or refused flag, a value out of range: the document drifted), except those a document quotes
+    as refused, which must be refused."""
+    parsed = line
+    for word, stand_in in DEFINED_BY_THE_DOCUMENT.items():
+        parsed = parsed.replace(word, stand_in)
+    argv = shlex.split(parsed)[1:]
+    parser = cli.build_parser(argv[0])
+    try:
+        parser.parse_args(argv)
+        status = 0
+    except SystemExit as exc:
+        status = cli.exit_status(exc)
+    err = capsys.readouterr().err
+    if line in QUOTED_AS_REFUSED:
+        assert status == 2, f"{QUOTED_AS_REFUSED[line]} quotes {line!r} as refused, but it parses"
+    else:
+        assert status == 0, f"{line!r} ({all_documented_command_lines()[line]}): {err}"
+
+
+def quick_form(line: str, out: Path) -> list[str] | None:
+    """A documented ``qpcontact simulate`` line made quick (4 cells, into ``out``, quiet), or None
+    for a line that needs a file or a run first (--resume, --start, --config) or names a
+    placeholder."""
+    argv = shlex.split(line)[1:]
+    if line in QUOTED_AS_REFUSED or argv[0] != "simulate" or any(a in argv for a in ("--resume", "--start", "--config", "--help")) or any(
+            re.fullmatch(r"[A-Z]+", a) for a in argv):
+        return None
+    if "--vtk" in argv and importlib.util.find_spec("meshio") is None:  # the extra: the parse above checks the flag
+        argv.remove("--vtk")
+    quick, skip = [], False
+    for a in argv:
+        if skip:
+            skip = False
+            continue
+        if a in ("--cells", "--out"):
+            skip = True
+            continue
+        quick.append(a)
+    return [*quick, "--cells", "4", "--out", str(out), "--quiet"]
+
+
+@pytest.mark.slow
+def test_every_documented_simulate_line_runs_in_a_quick_form(tmp_path, capsys):
+    """The documents' ``qpcontact simulate`` lines, each to 4 cells into a folder of its own."""
+    lines = [line for line in all_documented_command_lines() if quick_form(line, tmp_path) is not None]
+    assert len(lines) >= 8
+    for i, line in enumerate(lines):
+        argv = quick_form(line, tmp_path / f"run{i}")
+        assert argv is not None
+        status = cli.main(argv)
+        assert status == 0, f"{line!r}: {capsys.readouterr().err}"

@@ -210,6 +210,30 @@ def growth_drive(cells: Cells, length_increase: np.ndarray, dt: float) -> np.nda
     return np.where(growing, np.where(growing, cells.growth_inertia, 0.0) * length_increase / dt, 0.0)
 
 
+def check_division_length(division_length: float | np.ndarray, radii: float | np.ndarray) -> None:
+    """Refuse a division length at which a daughter would be born with a cylinder length of 0 or
+    less: a mother of length ``L`` leaves daughters of ``L/2 − ρ``, so ``L`` must exceed ``2ρ``.
+    The one check of :func:`divide`, ``qpcontact simulate`` (:class:`ModelSettings`) and a model
+    hook's ``division_length``.
+
+    Args:
+        division_length: one length, or one per cell [length].
+        radii: the cells' radii, one or one per cell [length].
+
+    Raises:
+        InvalidArgumentError: naming the length, ``2 × radius`` and the daughters' length.
+    """
+    length, radius = np.broadcast_arrays(np.asarray(division_length, dtype=float), np.asarray(radii, dtype=float))
+    short = ~(length > 2.0 * radius)
+    if np.any(short):
+        i = int(np.flatnonzero(short.ravel())[0])
+        at = "" if length.ndim == 0 else f" (cell {i})"
+        big, rho = float(length.ravel()[i]), float(radius.ravel()[i])
+        raise InvalidArgumentError(
+            f"division_length: must exceed 2 × radius = {2 * rho:g} µm (daughters are born at division_length/2 − "
+            f"radius = {big / 2 - rho:g} µm), got {big:g}{at}")
+
+
 def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.Generator, *,
            axis_noise: float = 0.02, rate_noise: float = 0.0, base_rate: float | None = None,
            planar: bool = False, type_rates: Any = None) -> Colony:
@@ -218,7 +242,8 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
     Args:
         colony: the colony.
         division_length: the length threshold [length], one for all or an (N,) array, one per
-            cell; must exceed ``2ρ`` so that daughters get a positive length.
+            cell; must exceed each cell's ``2ρ`` so that daughters get a positive length
+            (:func:`check_division_length`, the check ``qpcontact simulate`` makes too).
         rng: random numbers for the noise.
         axis_noise: standard deviation of each daughter's axis turn [rad].
         rate_noise: relative standard deviation of a daughter's growth rate around ``base_rate``
@@ -244,6 +269,7 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         if division_length.shape != (colony.cells.n,) or not np.all(np.isfinite(division_length) & (division_length > 0)):
             raise InvalidArgumentError(f"division_length: expected a number > 0 or {colony.cells.n} finite numbers > 0 "
                                        f"(one per cell), got shape {division_length.shape}")
+    check_division_length(division_length, colony.cells.radii)
     axis_noise = number("axis_noise", axis_noise, minimum=0.0)
     rate_noise = number("rate_noise", rate_noise, minimum=0.0)
     base_rate = number("base_rate", base_rate, minimum=0.0, allow_none=True)
@@ -259,9 +285,7 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         raise InvalidArgumentError(f"type_rates: gives {type_rates.size} types (0 to {type_rates.size - 1}), but a "
                                    f"dividing cell has type {int(mother_types.max())}")
     radii, lengths, axes = cells.radii[dividing], cells.lengths[dividing], cells.axes[dividing]
-    daughter_length = lengths / 2 - radii
-    if np.any(daughter_length <= 0):
-        raise InvalidArgumentError(f"division_length {division_length!r} is too short: daughters need l/2 > ρ")
+    daughter_length = lengths / 2 - radii  # > 0: lengths ≥ division_length > 2ρ (checked above)
     owed = colony.owed[dividing] / 2 + radii / 3.0
     shift = (daughter_length / 2 + radii)[:, None] * axes
     m = dividing.size

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import importlib.util
 import inspect
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,7 +58,7 @@ import numpy as np
 
 from ..errors import InvalidArgumentError, ModelHookError
 from ..timestep.mechanics import CellMechanics
-from .growth import Colony
+from .growth import Colony, check_division_length
 
 
 @dataclass
@@ -146,16 +147,33 @@ def apply_hook(hook: Hook | None, colony: Colony, step: int, mechanics: CellMech
         if length.shape not in ((), (n,)) or not np.all(np.isfinite(length) & (length > 0)):
             raise ModelHookError(f"model hook at step {step}: division_length must be a number or an ({n},) "
                                        "array, finite and > 0")
+        try:  # the check of divide and of simulate's settings: daughters of a positive length
+            check_division_length(length, control.colony.cells.radii)
+        except InvalidArgumentError as exc:
+            raise ModelHookError(f"model hook at step {step}: {exc}") from None
         control.division_length = length
     return control
+
+
+def _where(exc: Exception, path: Path) -> str:
+    """``"line 3: SyntaxError: '(' was never closed"``: the error and the line of ``path`` (the
+    model file) where it happened, when known."""
+    line = exc.lineno if isinstance(exc, SyntaxError) and exc.filename == str(path) else None
+    if line is None:
+        frames = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename == str(path)]
+        line = frames[-1].lineno if frames else None
+    text = exc.msg if isinstance(exc, SyntaxError) else str(exc)
+    return f"{'' if line is None else f'line {line}: '}{type(exc).__name__}: {text}"
 
 
 def load_hook(path: str | Path) -> Hook:
     """The function ``hook`` of a Python file (a model script).
 
     Raises:
-        InvalidArgumentError: the file is missing or defines no callable ``hook``. (An error
-            while the file runs propagates as it is: it is the model's own.)
+        InvalidArgumentError: the file is missing, does not load (a SyntaxError, an ImportError
+            or any other error while its top level runs: the message names the file, the line
+            and the error, in one line; the error is the ``__cause__``), or defines no callable
+            ``hook``. A command says this in one line, exit status 2, before the run starts.
     """
     path = Path(path)
     if not path.is_file():
@@ -164,7 +182,10 @@ def load_hook(path: str | Path) -> Hook:
     if spec is None or spec.loader is None:
         raise InvalidArgumentError(f"model {path}: not a Python file")
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as exc:  # the model's own error, but it stops the run before it starts
+        raise InvalidArgumentError(f"model {path}: does not load: {_where(exc, path)}") from exc
     hook = getattr(module, "hook", None)
     if not callable(hook):
         raise InvalidArgumentError(f"model {path}: defines no function hook(colony, step)")

@@ -25,7 +25,9 @@ import argparse
 import contextlib
 import multiprocessing
 import os
+import signal
 import tempfile
+import threading
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -101,11 +103,33 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
         return
     # Worker processes that may start children (the guarded cases; see call()); no dashboard, and
     # the scheduler's HTTP server (health checks) on a free port, not on 8787.
-    with dask.config.set({"distributed.worker.daemon": False}):
+    with dask.config.set({"distributed.worker.daemon": False}), sigint_ignored():
         cluster = distributed.LocalCluster(n_workers=workers or max(1, os.cpu_count() or 1), threads_per_worker=1,
                                            processes=True, dashboard_address=None, **NO_DASHBOARD)
     with cluster, distributed.Client(cluster) as client:
         yield client
+
+
+@contextlib.contextmanager
+def sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while the block runs (in the main thread; elsewhere nothing changes).
+
+    The local cluster's worker processes are started inside it, and an ignored signal stays
+    ignored in a child (Python and asyncio then install no handler of their own): a terminal's
+    Ctrl-C, which goes to the whole process group, reaches only the sweep's own process, which
+    stops the runs through its stop flag, each saving its state. Without it every worker died of
+    its own KeyboardInterrupt (about 100 lines of Dask tracebacks, 30 s, and the runs it cut
+    short reported as not started; issue 27). The price: a Ctrl-C during the few seconds the
+    cluster takes to start is not seen, and a worker that Dask restarts later (after one died) is
+    started without it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @contextlib.contextmanager

@@ -70,7 +70,7 @@ from ..io.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder, read_toml
 from ..io.snapshots import load_snapshot
 from ..outputs import describe_written, prepare_folder, write_csv, write_text
 from ..simulation.settings import Settings, add_setting_flags, file_layer, flag_layer, merge, refuse_unused
-from ..simulation.simulate import draw_pictures, run_colony
+from ..simulation.simulate import check_target, draw_pictures, founder, run_colony
 from . import cluster
 
 SWEEP_FILE = "sweep.json"
@@ -665,9 +665,20 @@ def report(sweep: Sweep) -> str:
     lines = [f"{len(sweep.runs)} runs: {counts['done']} done, {counts['failed']} failed, {counts['pending']} not finished"]
     for run in sweep.runs:
         if run["status"] != "done":
-            error = str(run.get("error") or "not started").splitlines()
+            error = str(run.get("error") or progress_of(sweep.folder(run))).splitlines()
             lines.append(f"  {run['status']}: {run['name']}: {error[-1] if error else ''}")
     return "\n".join(lines)
+
+
+def progress_of(folder: Path) -> str:
+    """What a run not finished and without an error got to, from its folder: ``"not started"``,
+    or ``"started, cut short; its latest snapshot: step N"`` (what ``--resume`` continues from;
+    a run stopped before its first snapshot starts again)."""
+    if not attempts_of(folder):
+        return "not started"
+    latest = RunFolder(folder).latest_snapshot()
+    return "started, cut short; " + ("no snapshot yet" if latest is None else
+                                     f"its latest snapshot: step {int(latest.stem.split('_')[-1])}")
 
 
 # ------------------------------------------------------------------------------------------
@@ -743,6 +754,12 @@ def prepare(args: argparse.Namespace) -> tuple[Sweep, list[dict[str, Any]]]:
                   [*layers, grid_layer("--vary", {name: values[0] for name, values in grid.vary.items()})])
     for hook in sorted({run["settings"]["model"]["hook"] for run in runs} - {""}):
         load_hook(hook)
+    for run in runs:  # a target no run can reach (rate 0, no hook): refused now, not after max_steps
+        settings = Settings.from_stored(run["settings"], run["name"])
+        try:
+            check_target(settings, founder(settings), settings.model.hook)
+        except InvalidArgumentError as exc:
+            raise InvalidArgumentError(f"run {run['name']}: {exc}") from None
     if (out / SWEEP_FILE).exists() and not args.overwrite:
         raise OutputFolderError(f"{args.out} holds a sweep ({SWEEP_FILE}); continue it with --resume, or pass "
                                 "--overwrite to replace it")

@@ -91,8 +91,9 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import instance
 from ..colony.growth import Colony
-from ..errors import InvalidSnapshotError, QPContactError
+from ..errors import InvalidArgumentError, InvalidSnapshotError, QPContactError
 from ..geometry import Cells
 from ..outputs import atomic_write
 from ..timestep.mechanics import CellMechanics
@@ -161,10 +162,30 @@ def npz_path(path: str | Path) -> Path:
     return path if path.suffix == ".npz" else path.with_name(path.name + ".npz")
 
 
+def file_path(path: str | Path) -> Path:
+    """:func:`npz_path` of a path that names a file: an existing folder is refused rather than
+    written beside (``run`` would become ``run.npz`` next to the folder ``run``).
+
+    Raises:
+        InvalidArgumentError: not a str or Path, or an existing folder.
+    """
+    if not isinstance(path, (str, Path)) or str(path) == "":
+        raise InvalidArgumentError(f"path: expected a file name (str or pathlib.Path), got {path!r}")
+    if Path(path).is_dir():
+        raise InvalidArgumentError(f"path: {path} is a folder; give a file name, e.g. {Path(path) / 'colony.npz'}")
+    return npz_path(path)
+
+
 def save_cells(path: str | Path, cells: Cells) -> Path:
     """Write the cell arrays alone to ``path`` (``.npz`` appended if missing; uncompressed; parent
-    folders are created), atomically. Returns the path written."""
-    return atomic_write(npz_path(path), lambda fh: np.savez(fh, **cell_arrays(cells)))
+    folders are created), atomically. Returns the path written.
+
+    Raises:
+        InvalidArgumentError: ``cells`` is not :class:`~qpcontact.geometry.Cells`, or ``path`` is
+            an existing folder (:func:`file_path`).
+    """
+    instance("cells", cells, Cells, "qpcontact.Cells")
+    return atomic_write(file_path(path), lambda fh: np.savez(fh, **cell_arrays(cells)))
 
 
 def load_cells(path: str | Path) -> Cells:
@@ -201,10 +222,14 @@ def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: M
         The path written.
 
     Raises:
+        InvalidArgumentError: ``colony`` is not a :class:`~qpcontact.colony.Colony`, or ``path``
+            is not a file name (an existing folder: the file would be written beside it, as
+            ``FOLDER.npz``).
         InvalidSnapshotError: extra arrays that cannot be stored, or mechanics whose shapes do
             not match the colony.
     """
-    path = npz_path(path)
+    instance("colony", colony, Colony, "a qpcontact.colony.Colony")
+    path = file_path(path)
     arrays: dict[str, Any] = {"format": np.array(FORMAT), "version": np.array(VERSION), "time": np.array(float(colony.time)),
                               "step": np.array(int(step), dtype=np.int64), "next_id": np.array(colony.next_id, dtype=np.int64),
                               "qpcontact_version": np.array(_writer_version())}

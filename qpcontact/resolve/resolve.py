@@ -14,7 +14,7 @@ from ..checks import flag, instance, mapping, number
 from ..errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
 from ..geometry.cells import Cells
 from ..geometry.contacts import Contacts, check_contacts, colliding, find_contacts
-from ..solvers import FORMS, FORMULATIONS, Problem, get_solver, solve, solve_min_norm
+from ..solvers import FORMS, FORMULATIONS, LinearSolution, Problem, get_solver, solve, solve_min_norm
 from ..solvers.registry import check_options
 from . import metrics
 
@@ -68,6 +68,12 @@ class Result:
         message: why the result is not converged, if it is not.
         system: the assembled system (None when nothing collided).
         scaled_solution: the scaled unknowns ``ỹ`` (for comparisons).
+        pulling: how many contact impulses pull (``λ_k < 0``); only the plain solve
+            (``solver="linear"``) gives them, and warns
+            (:class:`~qpcontact.errors.PullingImpulseWarning`): its all-active answer is then no
+            physical resolution.
+        linear_solution: the plain linear solve of ``system``, once :func:`compare_with_linear`
+            has computed it (kept so that a second comparison does not solve again).
     """
 
     impulses: np.ndarray
@@ -88,6 +94,8 @@ class Result:
     message: str = ""
     system: ContactSystem | None = field(default=None, repr=False)
     scaled_solution: np.ndarray | None = field(default=None, repr=False)
+    pulling: int = 0
+    linear_solution: LinearSolution | None = field(default=None, repr=False, compare=False)
 
     def summary(self) -> str:
         """One line: solver, status, contacts, unknowns, time, penetration."""
@@ -344,7 +352,11 @@ def resolve(
             (:func:`~qpcontact.resolve.resolve.acceptance_failure`), whatever the solver; an
             answer that the solver calls converged but that fails this is solved for once more
             at a tenth of the tolerance (:func:`solve_system`), otherwise it is not accepted.
-        margin: contacts closer than this also count [length].
+        margin: contacts closer than this also count [length]. The default counts only contacts
+            that touch: on a state that :func:`qpcontact.position_step` (``qpcontact
+            simulate``) left, whose contacts rest at a gap of up to ``aim`` (0.02 of a diameter),
+            it finds almost none (one contact on a grown colony of 3,084 cells); pass
+            ``margin=0.05`` µm or more there (README, "margin on a grown state").
         position_correction: β in ``b = −u + β·max(0, −d)/dt`` (0 = off); needs ``dt``.
         dt: the time step [time], for position correction.
         contacts: precomputed contacts (e.g. cell–cell plus cell–plane); found from ``cells`` if
@@ -448,6 +460,7 @@ def resolve(
         message=solution.message,
         system=system,
         scaled_solution=y,
+        pulling=int(solution.extras.get("pulling", 0)),
     )
     if not converged and on_failure == "raise":
         raise SolverFailedError(f"{solver}/{formulation}: {solution.message}", result)

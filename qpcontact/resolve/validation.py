@@ -40,11 +40,19 @@ class Agreement:
 
 
 def compare_with_linear(result: Result, *, tolerance: float = 1e-5, linear: LinearSolution | None = None) -> Agreement:
-    """Compare a converged QP result with the plain linear solve of the same system."""
+    """Compare a converged QP result with the plain linear solve of the same system.
+
+    The linear solve is done once per result and kept on it (``result.linear_solution``): a
+    second comparison (another ``tolerance``) reuses it. ``linear``: a solve the caller already
+    has (then nothing is solved)."""
     system = result.system
     if system is None or result.scaled_solution is None:
         return Agreement(True, 0.0, 0.0, 0, True if system is None else None)
-    lin = linear or solve_min_norm(system.matrix, system.rhs)
+    if linear is None:
+        if result.linear_solution is None:
+            result.linear_solution = solve_min_norm(system.matrix, system.rhs)
+        linear = result.linear_solution
+    lin = linear
     lam_scale = max(float(np.max(np.abs(lin.lam), initial=0.0)), 1e-300)
     inactive = int(np.sum(lin.lam <= ACTIVE_THRESHOLD * lam_scale))
     if result.formulation == "least_squares":

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from .. import described
-from ..colony.growth import Colony, expansion_time_step, growth_time_step
+from ..colony.growth import Colony, check_division_length, expansion_time_step, growth_time_step
 from ..described import Layer, Setting, check_fields, documented, setting, settings_of, table
 from ..errors import InvalidArgumentError
 from ..geometry.surfaces import Plane, substrate
@@ -120,11 +120,7 @@ class ModelSettings:
 
     def __post_init__(self) -> None:
         check_fields(self)
-        if not self.division_length > 2.0 * self.radius:
-            raise InvalidArgumentError(
-                f"division_length: must exceed 2 × radius = {2 * self.radius:g} µm (daughters are born at "
-                f"division_length/2 − radius = {self.division_length / 2 - self.radius:g} µm), got "
-                f"{self.division_length:g}")
+        check_division_length(self.division_length, self.radius)  # the check of divide, too
 
     def cycle_time(self) -> float:
         """The time a cell growing freely at ``rate`` takes from birth to division [doubling
@@ -292,21 +288,31 @@ class Settings:
         """The run's planes: the substrate ``z = 0`` in 3D, none in 2D."""
         return [] if self.run.dimensions == 2 else [substrate(0.0)]
 
-    def step_options(self) -> dict[str, Any]:
+    def step_options(self, dimensions: int | None = None) -> dict[str, Any]:
         """The options a run with ``step = "velocity"`` passes to :func:`qpcontact.colony.grow`
         and so to :func:`qpcontact.step`: solver, formulation, form, tolerance, margin, position
         correction, planes (the substrate in 3D), planar (2D), dynamics (and damping).
 
         ``step``'s own defaults are those of a single contact solve (no margin, no position
         correction); in your own loop, ``step(cells, dt, **Settings().step_options())`` steps as
-        ``qpcontact simulate --step velocity`` does.
+        ``qpcontact simulate --step velocity`` does in 2D (a monolayer: ``planar=True``, which
+        refuses cells out of the plane), and ``Settings().step_options(dimensions=3)`` (or the
+        options of a settings object with ``dimensions = 3``) as it does in 3D (the substrate, no
+        planar reduction).
+
+        Args:
+            dimensions: 2 or 3, the loop's; default ``run.dimensions`` (2 unless set).
         """
+        if dimensions is None:
+            dimensions = self.run.dimensions
+        if dimensions not in (2, 3) or isinstance(dimensions, bool):
+            raise InvalidArgumentError(f"dimensions: expected 2 or 3, got {dimensions!r}")
         v = self.velocity
-        planar = self.run.dimensions == 2
+        planar = dimensions == 2
         options: dict[str, Any] = dict(
             solver=v.solver, formulation=v.formulation, form=v.form, tolerance=v.tolerance, margin=v.margin,
-            position_correction=v.position_correction, planes=self.planes(), planar=True if planar else None,
-            dynamics=v.dynamics)
+            position_correction=v.position_correction, planes=[] if planar else [substrate(0.0)],
+            planar=True if planar else None, dynamics=v.dynamics)
         if v.dynamics == "inertial":
             options["damping"] = v.damping
         return options

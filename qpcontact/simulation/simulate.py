@@ -54,12 +54,16 @@ driven by a force f moves at f/V µm per doubling time). With ``--pressure-growt
 
 A step whose contact solve fails is never applied: the run stops there, says why, saves what
 it has and exits with status 1. Ctrl-C (or SIGTERM) stops the run cleanly: the state reached,
-the history and the pictures are saved, and ``--resume`` continues it (exit status 130, or 143).
+the history and the pictures are saved, and ``--resume`` continues it (exit status 128 + the
+signal's number: 130 for SIGINT, 143 for SIGTERM). A run that stops at ``--max-steps`` short of
+``--cells`` says so and exits with status 3 (:data:`EXIT_SHORT`); a target it can never reach
+(rate 0 without a hook) is refused before it starts (:func:`check_target`).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import time
@@ -276,6 +280,56 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> 
     return take_step
 
 
+#: Exit status of ``qpcontact simulate`` for a run that stopped at ``--max-steps`` short of its
+#: ``--cells`` target (1: the run failed; 2: it could not start; 128 + N: stopped by signal N).
+EXIT_SHORT = 3
+
+
+def most_cells(settings: Settings, colony: Colony) -> float:
+    """The most cells a run from ``colony`` can reach without a model hook: no limit when
+    newborn cells grow (``rate > 0``); at rate 0 every cell growing now divides at most once,
+    since its daughters are born at rate 0 (pressure-dependent growth only slows it)."""
+    if settings.model.rate > 0:
+        return math.inf
+    return colony.cells.n + int(np.count_nonzero(colony.rates > 0))
+
+
+def check_target(settings: Settings, colony: Colony, hook: Any) -> None:
+    """Refuse a ``cells`` target that a run from ``colony`` can never reach (:func:`most_cells`),
+    before it starts: it would run ``max_steps`` steps of a colony that does not grow. A model
+    hook may set growth rates, so with one nothing is refused.
+
+    Raises:
+        InvalidArgumentError: naming the target, the rate and what to change.
+    """
+    if hook:
+        return
+    most = most_cells(settings, colony)
+    if settings.run.cells > most:
+        raise InvalidArgumentError(
+            f"cells: the target of {settings.run.cells} cells can never be reached at rate {settings.model.rate:g} "
+            f"(cells born now do not grow: at most {int(most)} cell{'s' if most > 1 else ''} from this start); give a rate > 0, or a model "
+            "hook that sets growth rates")
+
+
+def flags_to_try(settings: Settings) -> str:
+    """What to change when a run's step fails, as the flags of ``qpcontact simulate`` (and TOML
+    keys) with their current values: the end of a failed run's message."""
+    run = settings.run
+    smaller = (f"--growth-per-step {run.growth_per_step / 2:g}" if settings.time_step_rule() == "growth"
+               else f"--max-dt {run.max_dt / 2:g}")
+    if run.step == "position":
+        p = settings.position
+        return (f"To try: smaller steps ({smaller}, or --max-halvings {run.max_halvings + 2}: each failed step "
+                f"is retried with half the step that many times), more linearizations (--position-max-iterations "
+                f"{2 * p.max_iterations}), a looser --position-tolerance (now {p.tolerance:g}) or "
+                f"--position-overlap-tolerance (now {p.overlap_tolerance:g}), or another --position-solver (now "
+                f"{p.solver}: {'mprgp or clarabel' if p.solver == 'ipm' else 'ipm'}); continue with --resume")
+    v = settings.velocity
+    return (f"To try: smaller steps ({smaller}), a looser --velocity-tolerance (now {v.tolerance:g}), or another "
+            f"--velocity-solver (now {v.solver}); continue with --resume")
+
+
 def initial_state(settings: Settings, start: Colony | Snapshot | None) -> tuple[Colony, int, np.random.Generator,
                                                                                    dict[str, np.ndarray]]:
     """``(colony, step index, random generator, extra state)`` a run starts from: the founder,
@@ -382,6 +436,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     state = start_run(settings, start, frame_growth)
     if hook is None and settings.model.hook:
         hook = load_hook(settings.model.hook)
+    check_target(settings, state.colony, hook)
     take_step = step_function(settings, state.extra)  # the run's one step function (swap it here)
     if pressure_growth is None:
         pressure_growth = pressure_growth_of(settings)
@@ -517,7 +572,7 @@ def attempt_step(state: RunState, settings: Settings, interrupt: Interrupt, hook
     except ModelHookError as exc:
         state.error, state.exception = f"{where}: {exc}", exc
     except SolverFailedError as exc:
-        state.error, state.exception = f"{where}: contact solve failed, not applied: {exc}", exc
+        state.error, state.exception = f"{where}: contact solve failed, not applied: {exc}. {flags_to_try(settings)}", exc
     except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
         state.error, state.exception = f"{where}: step not applied: {exc}", exc
     return None
@@ -623,6 +678,7 @@ def open_run(args: argparse.Namespace) -> tuple[Settings, Snapshot | None, RunFo
         _meshio()  # a named error now if meshio is missing
     if settings.model.hook:
         load_hook(settings.model.hook)
+    check_target(settings, initial_state(settings, snapshot)[0], settings.model.hook)
     if snapshot is not None and in_place:
         folder = RunFolder.resume(args.out, snapshot, overwrite=args.overwrite, vtk=settings.output.vtk)
     else:
@@ -685,6 +741,11 @@ def run_command(args: argparse.Namespace) -> int:
             traceback.print_exception(result.exception.__cause__, file=sys.stderr)
         print(f"qpcontact simulate: {result.error}", file=sys.stderr)
         return 1
+    if result.colony.cells.n < settings.run.cells:
+        print(f"qpcontact simulate: stopped at step {result.steps} (--max-steps {settings.run.max_steps}) with "
+              f"{result.colony.cells.n} of the {settings.run.cells} cells of --cells; continue with: qpcontact simulate "
+              f"--resume --max-steps N --out {folder.path} (exit status {EXIT_SHORT})", file=sys.stderr)
+        return EXIT_SHORT
     return 0
 
 

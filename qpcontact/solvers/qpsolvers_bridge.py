@@ -105,11 +105,26 @@ def tolerance_settings(backend: str, tolerance: float, time_limit: float | None,
     return s
 
 
+#: Backends that need ``rank([P; A; G])`` = the number of variables (CVXOPT's ``coneqp``): a
+#: least_squares problem whose ``B̃`` has dependent columns (a jammed packing's rigid motions no
+#: contact resists: 119 of 122 on the 61-cell ``jammed_packing``) or rows has none there at ε = 0,
+#: and CVXOPT stopped with "Terminated (singular KKT matrix)", status "unknown" (issue 28). Such a
+#: least_squares solve that finds nothing is solved once more with :data:`RIDGE` on the first block
+#: of the lifted problem (its status then says so).
+NEEDS_FULL_RANK = ("cvxopt", "kvxopt")
+#: The ridge of :data:`NEEDS_FULL_RANK` (scaled units, against the residual's weight 1): ``½·RIDGE·‖ỹ‖²``
+#: (primal form; the exact minimum-norm selection that follows keeps only ``B̃ỹ``) or
+#: ``½·RIDGE·‖λ̃‖²`` (contact form). It moves the fit by O(RIDGE), far inside any tolerance.
+RIDGE = 1e-10
+
+
 def qp_problem(matrix: sp.spmatrix, rhs: np.ndarray, formulation: str, form: str,
                regularization: float = 0.0, lower: np.ndarray | None = None,
-               upper: np.ndarray | None = None) -> qpsolvers.Problem:
+               upper: np.ndarray | None = None, ridge: float = 0.0) -> qpsolvers.Problem:
     """The qpsolvers Problem for ``B̃ = matrix``, ``b̃ = rhs`` in a formulation and form (see the
-    module docstring); ``lower``/``upper`` bound ``ỹ`` (complementarity, primal form only)."""
+    module docstring); ``lower``/``upper`` bound ``ỹ`` (complementarity, primal form only);
+    ``ridge``: ``ridge·I`` added to the first block of a lifted least_squares problem
+    (:data:`NEEDS_FULL_RANK`)."""
     B = matrix.tocsc()
     k, n = B.shape
     if formulation == "complementarity" and form == "primal":
@@ -123,11 +138,11 @@ def qp_problem(matrix: sp.spmatrix, rhs: np.ndarray, formulation: str, form: str
         return qpsolvers.Problem(P=(B @ B.T).tocsc().sorted_indices(), q=-rhs, lb=np.zeros(k), ub=np.full(k, np.inf))
     if formulation == "least_squares":
         if form == "primal":
-            top, width = regularization * sp.identity(n, format="csc"), n
+            top, width = (regularization + ridge) * sp.identity(n, format="csc"), n
             eq = sp.hstack([B, -sp.identity(k)], format="csc")
         else:
             a = (B @ B.T).tocsc().sorted_indices()
-            top, width = regularization * a, k
+            top, width = (regularization * a + ridge * sp.identity(k, format="csc")).tocsc(), k
             eq = sp.hstack([a, -sp.identity(k)], format="csc")
         P = sp.block_diag([top, sp.identity(k)], format="csc")
         lb = np.concatenate([np.full(width, -np.inf), np.zeros(k)])
@@ -184,18 +199,33 @@ def solve_backend(backend: str, problem: Problem, formulation: str, form: str, *
     options = {**tolerance_settings(backend, tolerance, time_limit, formulation), **settings}
     B, rhs = problem.matrix, problem.rhs
     t0 = time.perf_counter()
-    qp = qp_problem(B, rhs, formulation, form, problem.regularization, problem.lower, problem.upper)
-    if _dense_only(backend):
-        qp = qpsolvers.Problem(*(_dense(m) for m in qp.unpack()))
-    t1 = time.perf_counter()
-    try:
+    setup = 0.0
+
+    def attempt(ridge: float) -> qpsolvers.Solution:
+        nonlocal setup
+        start = time.perf_counter()
+        qp = qp_problem(B, rhs, formulation, form, problem.regularization, problem.lower, problem.upper, ridge=ridge)
+        if _dense_only(backend):
+            qp = qpsolvers.Problem(*(_dense(m) for m in qp.unpack()))
+        setup += time.perf_counter() - start
         with warnings.catch_warnings(), (_quiet_stdout() if backend in CHATTY else contextlib.nullcontext()):
             warnings.simplefilter("ignore")  # the status is reported in the output instead
-            solution = qpsolvers.solve_problem(qp, solver=backend, verbose=False, **options)
+            return qpsolvers.solve_problem(qp, solver=backend, verbose=False, **options)
+
+    ridged = False
+    try:
+        solution = attempt(0.0)
+        if not solution.found and backend in NEEDS_FULL_RANK and formulation == "least_squares":
+            # A singular KKT matrix (NEEDS_FULL_RANK): once more with the ridge; only then, so
+            # that every problem CVXOPT solves without it is solved exactly as before.
+            solution, ridged = attempt(RIDGE), True
     except Exception as exc:  # backends raise many types; the failure is reported, not hidden
-        return SolverOutput(None, None, False, "error", None, t1 - t0, time.perf_counter() - t1,
+        return SolverOutput(None, None, False, "error", None, setup, time.perf_counter() - t0 - setup,
                             error=f"{type(exc).__name__}: {exc}")
+    t1 = t0 + setup
     status, iterations = _status(solution)
+    if ridged:
+        status += f" (with a ridge of {RIDGE:g})"
     x = solution.x
     k, n = B.shape
     y = lam = None

@@ -54,6 +54,7 @@ from typing import Any
 import numpy as np
 
 from ..arguments import add_output_arguments, comma_list, non_negative_int, positive_float, positive_int, run_standalone
+from ..arguments import tolerance as tolerance_type
 from ..assembly import ContactSystem, build_system
 from ..errors import OutputFolderError
 from ..geometry import Cells, colliding, find_contacts
@@ -441,11 +442,11 @@ def _too_slow(previous: dict[str, Any] | None, n_cells: int, solvers: list[str],
 
 def solver_spec(text: str) -> str:
     """A ``--solvers`` item ``name[/form][@tolerance]``, checked: an installed solver (or baseline),
-    a form it takes, a positive tolerance."""
+    a form it takes, a tolerance in (0, 1)."""
     head, at, tolerance = text.partition("@")
     name, _, form = head.partition("/")
     if at:
-        positive_float(tolerance)
+        tolerance_type(tolerance)
     if name not in available_solvers(include_baselines=True):
         raise argparse.ArgumentTypeError(f"unknown or uninstalled solver {name!r}; known: "
                                          f"{', '.join(available_solvers(include_baselines=True))}")
@@ -474,10 +475,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "are reported (default: 3; --quick: 2)")
     p.add_argument("--solvers", type=comma_list(solver_spec), default=list(DEFAULT_SOLVERS), metavar="LIST",
                    help="comma-separated solvers, each name[/FORM][@TOL]: FORM picks a form (linear/primal: LSMR "
-                        "instead of LU; osqp/contact), TOL that solver's tolerance (clarabel/primal@1e-9) "
+                        "instead of Cholesky; osqp/contact), TOL that solver's tolerance (clarabel/primal@1e-9) "
                         f"(default: {','.join(DEFAULT_SOLVERS)}; installed: "
                         f"{', '.join(available_solvers(include_baselines=True))})")
-    p.add_argument("--tolerance", type=positive_float, default=TARGET_ERROR,
+    p.add_argument("--tolerance", type=tolerance_type, default=TARGET_ERROR,
                    help=f"tolerance handed to the solvers [dimensionless, scaled units] (default: {TARGET_ERROR:g})")
     p.add_argument("--time-limit", type=positive_float, default=120.0,
                    help="time limit per QP solve [s], where the backend takes one (default: 120)")

@@ -52,6 +52,7 @@ import numpy as np
 import qpsolvers
 
 from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
+from ..arguments import tolerance as tolerance_type
 from ..assembly import ContactSystem, build_system
 from ..ensembles import cluster
 from ..errors import InvalidArgumentError, UnknownSolverError
@@ -542,7 +543,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--solvers", type=comma_list(), metavar="LIST",
                         help="comma-separated solvers (default: every installed one, baselines included: "
                              f"{', '.join(available_solvers(include_baselines=True))})")
-    parser.add_argument("--tolerances", type=comma_list(positive_float), metavar="LIST",
+    parser.add_argument("--tolerances", type=comma_list(tolerance_type), metavar="LIST",
                         help="comma-separated solver tolerances [dimensionless, scaled units] (default: 1e-3,1e-6,1e-9; "
                              "--quick: 1e-3,1e-6)")
     parser.add_argument("--repeats", type=positive_int, default=None,

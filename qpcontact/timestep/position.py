@@ -743,5 +743,15 @@ def position_step(
     result = _result(progress, cells, now, contacts, diameter, converged, iteration, excess, start_overlap, ids, dt,
                      drive, message, times)
     if not converged and on_failure == "raise":
-        raise StepFailedError(f"position step did not converge: {message}", result)
+        raise StepFailedError(f"position step did not converge: {message}; {what_to_try(settings)}", result)
     return result
+
+
+def what_to_try(settings: PositionSettings) -> str:
+    """What to change when a position step fails, with the settings' current values (a failed
+    step's message ends with it)."""
+    other = "mprgp or clarabel" if settings.solver == "ipm" else "ipm"
+    return (f"try: a smaller dt (half: each linearization is then nearer to linear), more linearizations "
+            f"(max_iterations, now {settings.max_iterations}), a looser solver tolerance (tolerance, now "
+            f"{settings.tolerance:g}) or overlap_tolerance (now {settings.overlap_tolerance:g}), or another solver "
+            f"(solver, now {settings.solver}: {other})")

@@ -167,7 +167,7 @@ def step(
     wants both: ``qpcontact simulate --step velocity`` steps with ``margin=0.3`` [µm],
     ``position_correction=0.5`` and Clarabel at 1e-6 (its ``[velocity]`` settings);
     ``step(cells, dt, **Settings().step_options())`` (with :class:`qpcontact.colony.Settings`)
-    does the same in your own loop.
+    does the same in your own 2D loop, ``Settings().step_options(dimensions=3)`` in a 3D one.
 
     Args:
         cells: the state at time ``t``.

@@ -64,8 +64,26 @@ def test_division_conserves_volume_mass_and_momentum_and_records_lineage():
     for _ in range(40):
         grown, _ = grow(grown, 0.05)
     assert np.all(grown.owed == 0)
-    with pytest.raises(InvalidArgumentError, match="too short"):
+    with pytest.raises(InvalidArgumentError, match="division_length: must exceed 2 × radius"):
         divide(colony, 0.9, np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("length", [0.4, 1.0, [5.0, 0.8]])
+def test_divide_refuses_the_division_lengths_simulate_refuses(length):
+    """issue 28: divide accepted a division length of at most 2ρ as long as the dividing cells
+    were long enough (a cell of 2.5 at a threshold of 0.4: daughters of 0.75, then daughters of
+    those at 0.4 − ...), where qpcontact simulate refuses it. One check for both, same words."""
+    from qpcontact.colony.growth import check_division_length
+    from qpcontact.simulation import ModelSettings
+
+    colony = Colony.founder(q.Cells([[0, 0, 0], [0, 3, 0]], [1, 0, 0], [2.5, 2.5], 0.5), rates=1.0)
+    with pytest.raises(InvalidArgumentError, match=r"division_length: must exceed 2 × radius = 1 µm \(daughters are born"):
+        divide(colony, np.asarray(length) if isinstance(length, list) else length, np.random.default_rng(0))
+    if np.ndim(length) == 0:
+        with pytest.raises(InvalidArgumentError, match=r"division_length: must exceed 2 × radius = 1 µm \(daughters"):
+            ModelSettings(division_length=length)
+    check_division_length(1.01, 0.5)  # just above 2ρ: born at 0.005
+    assert divide(colony, 1.01, np.random.default_rng(0)).cells.n == 4
 
 
 

@@ -83,6 +83,7 @@ def test_a_hook_may_return_a_colony_or_none():
     (lambda colony: 3, "returned int; expected None, a Colony or a StepControl"),
     (lambda colony: StepControl(drive=np.zeros((colony.cells.n, 6))), r"drive must be a finite \(1, 7\) array"),
     (lambda colony: StepControl(division_length=-1.0), "division_length must be a number"),
+    (lambda colony: StepControl(division_length=0.9), r"division_length: must exceed 2 × radius = 1 µm"),
     (lambda colony: 1 / 0, "raised ZeroDivisionError: division by zero"),
 ])
 def test_a_bad_hook_stops_the_run_with_a_named_error_and_the_state_saved(tmp_path, answer, message):
@@ -107,6 +108,25 @@ def test_simulate_runs_a_model_file_and_saves_it_in_the_settings(tmp_path, capsy
     assert "Traceback" in err and "broken.py" in err and "my model is wrong" in err  # the model's own traceback
     assert main(["simulate", "--hook", str(tmp_path / "nosuch.py"), "--out", str(tmp_path / "c"), "--quiet"]) == 2
     assert "nosuch.py: no such file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", ["simulate", "sweep"])
+@pytest.mark.parametrize(("source", "error"), [
+    ("def hook(colony, step:\n    pass\n", "line 1: SyntaxError"),
+    ("import numpy\nimport no_such_module_for_qpcontact\n", "line 2: ModuleNotFoundError"),
+    ("raise RuntimeError('my model does not load')\n", "line 1: RuntimeError: my model does not load"),
+])
+def test_a_hook_that_does_not_load_is_one_line_and_exit_2(tmp_path, capsys, command, source, error):
+    """docs/colony.md: a model hook that does not load is exit status 2 and one line, no
+    traceback, before anything is written."""
+    model = tmp_path / "model.py"
+    model.write_text(source)
+    out = tmp_path / "out"
+    assert main([command, "--hook", str(model), "--cells", "3", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert f"model {model}: does not load: {error}" in err
+    assert not out.exists()
 
 
 def test_a_dividing_mother_gives_each_daughter_half_her_hook_drive():

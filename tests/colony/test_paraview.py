@@ -9,6 +9,7 @@ import pytest
 from qpcontact.cli import main
 from qpcontact.io.paraview import ARRAYS, MECHANICS_ARRAYS, read_series
 from qpcontact.io.snapshots import load_snapshot
+from qpcontact.simulation.simulate import EXIT_SHORT
 
 meshio = pytest.importorskip("meshio", reason="ParaView files need the extra qpcontact[vtk]")
 
@@ -125,8 +126,8 @@ def test_the_files_follow_the_vtk_xml_format_paraview_reads(run_3d):
 def test_a_resumed_run_keeps_the_earlier_entries_of_the_series(tmp_path):
     out = tmp_path / "run"
     assert main(["simulate", "--cells", "3", "--vtk", "--snapshot-every", "5", "--max-dt", "0.1", "--max-steps", "12",
-                 "--out", str(out), "--quiet"]) == 0
-    assert main(["simulate", "--resume", "--max-steps", "17", "--vtk", "--out", str(out), "--quiet"]) == 0
+                 "--out", str(out), "--quiet"]) == EXIT_SHORT  # short of --cells at --max-steps
+    assert main(["simulate", "--resume", "--max-steps", "17", "--vtk", "--out", str(out), "--quiet"]) == EXIT_SHORT  # short of --cells at --max-steps
     steps = [int(f.stem.split("_")[1]) for _, f in read_series(out / "colony.pvd")]
     assert steps == [5, 10, 12, 15, 17]
 

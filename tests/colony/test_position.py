@@ -263,6 +263,9 @@ def test_an_answer_the_solver_did_not_stand_by_is_never_applied(monkeypatch):
     with pytest.raises(StepFailedError, match="stalled") as caught:
         position_step(cells, 0.05, drive=growing(cells))
     assert not caught.value.result.converged
+    # ... and says what to try, with the settings' values (issue 27: "stalled" and nothing else).
+    assert ("try: a smaller dt" in str(caught.value) and "max_iterations, now 30" in str(caught.value)
+            and "solver, now ipm: mprgp or clarabel" in str(caught.value))
 
 
 def test_an_update_that_throws_cells_into_each_other_is_backtracked(monkeypatch):
@@ -378,3 +381,44 @@ def test_end_positions_agree_with_a_tight_step_to_a_thousandth_of_a_diameter(dim
     assert tight.result.solver_iterations > default.result.solver_iterations  # a different, tighter solve
     assert default.result.max_overlap <= settings.position.overlap_tolerance
     assert end_difference(default.colony, tight.colony) <= 1e-3
+
+
+def test_a_deep_starting_overlap_is_relaxed_by_relaxation_per_step_as_the_readme_says():
+    """README: the 0.01 bound is for overlap a step makes; one the cells start with is removed by
+    ``relaxation`` + ``aim`` (0.05 + 0.03 of a diameter) per step, so a deep start takes steps
+    to clear (0.3 deep: 0.22, 0.14, 0.06, 0)."""
+    import re
+    from pathlib import Path
+
+    import qpcontact as qc
+
+    readme = " ".join((Path(__file__).resolve().parents[2] / "README.md").read_text().split())
+    assert re.search(r"removes only `relaxation` \+ `aim`, 0\.05 \+ 0\.03 of a diameter, of an overlap it starts "
+                     r"with, so that no cell is thrown \(0\.3 deep: 0\.22, 0\.14, 0\.06, 0 after each step\)",
+                     readme)
+    settings = qc.PositionSettings()
+    assert (settings.relaxation, settings.aim, settings.overlap_tolerance) == (0.05, 0.03, 0.01)
+    cells = qc.Cells([[0.0, 0.0, 0.0], [0.0, 0.7, 0.0]], [1, 0, 0], 2.0, 0.5)  # 0.3 of a diameter deep
+    overlaps = []
+    for _ in range(8):
+        out = qc.position_step(cells, 0.01, settings=settings)
+        cells = out.cells
+        overlaps.append(out.max_overlap)
+    per_step = settings.relaxation + settings.aim
+    assert overlaps[:3] == pytest.approx([0.3 - per_step * k for k in (1, 2, 3)], abs=0.002)
+    assert overlaps[-1] <= settings.overlap_tolerance
+
+
+def test_resolve_on_a_grown_state_needs_a_margin_as_documented():
+    """The position step leaves its contacts at a gap of up to ``aim``: resolve at margin 0 finds
+    almost none of them, at the documented margin 0.05 µm nearly every touching pair."""
+    import qpcontact as qc
+    from qpcontact.simulation.simulate import Settings, run_colony
+
+    cells = run_colony(Settings().updated({"cells": 60}), progress=False).colony.cells
+    offset = cells.centers - cells.centers.mean(axis=0)
+    pushed = qc.Cells(cells.centers, cells.axes, cells.lengths, cells.radii, momenta=-offset)
+    near = len(qc.resolve(pushed, solver="clarabel").contacts)
+    documented = len(qc.resolve(pushed, solver="clarabel", margin=0.05).contacts)
+    assert near <= 0.1 * documented and documented >= cells.n
+    assert "margin=0.05" in qc.resolve.__doc__

@@ -18,7 +18,7 @@ from qpcontact.errors import OutputFolderError
 from qpcontact.io.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder, read_toml, write_toml
 from qpcontact.io.snapshots import load_snapshot
 from qpcontact.simulation import simulate
-from qpcontact.simulation.simulate import Settings, run_colony
+from qpcontact.simulation.simulate import EXIT_SHORT, Settings, run_colony
 from tests.helpers import default_signals, gate_model, wait_for
 
 #: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
@@ -115,7 +115,7 @@ def test_ctrl_c_or_sigterm_stops_simulate_cleanly_and_resume_continues_it(tmp_pa
         assert (out / name).stat().st_size > 0, name
     assert str(snapshots[0].parent) in stdout  # it says what it wrote
 
-    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "9"]) == 0
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "9"]) == EXIT_SHORT  # short of --cells at --max-steps
     assert [int(row["step"]) for row in history(out)] == list(range(9))
     assert load_snapshot(out / "snapshots" / "step_000009.npz").step == 9
 
@@ -150,7 +150,7 @@ def test_a_run_started_from_another_runs_snapshot_continues_its_numbering(tmp_pa
     start = first / "snapshots" / "step_000010.npz"
     second = tmp_path / "second"
     assert main(["simulate", "--start", str(start), "--out", str(second), "--quiet", "--max-steps", "13",
-                 "--snapshot-every", "0"]) == 0
+                 "--snapshot-every", "0"]) == EXIT_SHORT  # short of --cells at --max-steps
     assert [int(row["step"]) for row in history(second)] == [10, 11, 12]
     assert history(second) == history(first)[10:13]  # the same trajectory: settings and random state travel along
     assert [p.name for p in (second / "snapshots").iterdir()] == ["step_000013.npz"]
@@ -293,7 +293,7 @@ def test_a_killed_run_leaves_whole_snapshots_and_resumes_with_a_contiguous_histo
     snapshots = sorted((out / "snapshots").glob("step_*.npz"))
     assert [load_snapshot(p).step for p in snapshots] == [3, 6, 9]  # none truncated
     assert len(history(out)) == 10
-    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == 0
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == EXIT_SHORT  # short of --cells at --max-steps
     assert [int(row["step"]) for row in history(out)] == list(range(13))
     assert not [p for p in out.rglob(".*.tmp")]
 
@@ -323,7 +323,7 @@ def test_a_run_folder_written_before_the_pressure_columns_is_resumed(tmp_path):
     kept, with those columns NaN, and the resumed steps have them."""
     out = tmp_path / "run"
     assert main(["simulate", "--cells", "3", "--out", str(out), "--quiet", "--snapshot-every", "5", "--max-dt", "0.1",
-                 "--max-steps", "10"]) == 0
+                 "--max-steps", "10"]) == EXIT_SHORT  # short of --cells at --max-steps
     legacy = [name for name in HISTORY_FIELDS if name not in ("mean_pressure", "max_pressure")]
     with (out / "history.csv").open(newline="") as fh:
         rows = [{k: row[k] for k in legacy} for row in csv.DictReader(fh)]
@@ -331,7 +331,7 @@ def test_a_run_folder_written_before_the_pressure_columns_is_resumed(tmp_path):
         writer = csv.DictWriter(fh, fieldnames=legacy)
         writer.writeheader()
         writer.writerows(rows)
-    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == 0
+    assert main(["simulate", "--resume", "--out", str(out), "--quiet", "--max-steps", "13"]) == EXIT_SHORT  # short of --cells at --max-steps
     history = RunFolder(out).read_history()
     assert len(history["step"]) == 13 and np.all(np.isnan(history["mean_pressure"][:10]))
     assert np.all(np.isfinite(history["mean_pressure"][10:]))

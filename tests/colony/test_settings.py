@@ -17,6 +17,7 @@ from qpcontact.io.runs import read_toml
 from qpcontact.io.snapshots import load_snapshot, save_colony
 from qpcontact.simulation import Settings, run_colony
 from qpcontact.simulation.settings import FORMER_NAMES
+from qpcontact.simulation.simulate import EXIT_SHORT
 from qpcontact.timestep import PositionSettings
 
 
@@ -132,7 +133,7 @@ def test_a_flag_that_does_not_apply_or_cannot_be_used_is_refused_before_the_run(
 def test_a_flag_of_the_step_that_runs_is_taken(tmp_path):
     out = tmp_path / "run"
     assert cli.main(["simulate", "--step", "velocity", "--velocity-solver", "osqp", "--velocity-tolerance", "1e-4",
-                     "--cfl", "0.2", "--max-steps", "3", "--out", str(out), "--quiet"]) == 0
+                     "--cfl", "0.2", "--max-steps", "3", "--out", str(out), "--quiet"]) == EXIT_SHORT  # short of --cells at --max-steps
     saved = read_toml(out / "config.toml")
     assert (saved["velocity"]["solver"], saved["velocity"]["tolerance"], saved["run"]["cfl"]) == ("osqp", 1e-4, 0.2)
     assert "position" not in saved and "growth_per_step" not in saved["run"]  # only what applies
@@ -182,10 +183,10 @@ def test_a_run_with_a_relative_hook_resumes_from_any_directory(tmp_path, monkeyp
     monkeypatch.chdir(project)
     out = tmp_path / "run"
     assert cli.main(["simulate", "--hook", "model.py", "--cells", "4", "--snapshot-every", "5", "--max-steps", "20",
-                     "--out", str(out), "--quiet"]) == 0
+                     "--out", str(out), "--quiet"]) == EXIT_SHORT  # short of --cells at --max-steps
     assert read_toml(out / "config.toml")["model"]["hook"] == str(project / "model.py")
     monkeypatch.chdir(elsewhere)
-    assert cli.main(["simulate", "--resume", "--max-steps", "25", "--out", str(out), "--quiet"]) == 0
+    assert cli.main(["simulate", "--resume", "--max-steps", "25", "--out", str(out), "--quiet"]) == EXIT_SHORT
     # In a config file, a path is relative to the file's folder.
     (project / "run.toml").write_text('[model]\nhook = "model.py"\n[run]\ncells = 2\n')
     assert cli.main(["simulate", "--config", str(project / "run.toml"), "--out", str(tmp_path / "b"), "--quiet"]) == 0
@@ -255,7 +256,7 @@ def test_pressure_growth_flags_slow_the_run_as_the_law_does_and_are_named_where_
     common = ["--cells", "1000000", "--max-steps", "40", "--quiet"]
     slowed_out, free_out = tmp_path / "slowed", tmp_path / "free"
     assert cli.main(["simulate", "--pressure-growth", "linear", "--stall-pressure", "0.5", *common,
-                     "--out", str(slowed_out)]) == 0
+                     "--out", str(slowed_out)]) == EXIT_SHORT  # short of --cells at --max-steps
     printed = capsys.readouterr().out
     assert "pressure growth linear, stall pressure 0.5 F/µm" in printed
     saved = read_toml(slowed_out / "config.toml")["model"]
@@ -268,7 +269,7 @@ def test_pressure_growth_flags_slow_the_run_as_the_law_does_and_are_named_where_
     np.testing.assert_array_equal(explicit.colony.cells.centers, slowed.colony.cells.centers)
     np.testing.assert_array_equal(explicit.colony.cells.lengths, slowed.colony.cells.lengths)
     assert explicit.colony.time == slowed.colony.time
-    assert cli.main(["simulate", *common, "--out", str(free_out)]) == 0
+    assert cli.main(["simulate", *common, "--out", str(free_out)]) == EXIT_SHORT  # short of --cells at --max-steps
     printed = capsys.readouterr().out
     assert "pressure growth off" in printed
     saved = read_toml(free_out / "config.toml")["model"]

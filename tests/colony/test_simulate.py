@@ -38,6 +38,8 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
     ({"position_tolerance": 2.0}, r"position_tolerance: expected a number in \(0, 1\)"),
     ({"division_length": 0.5}, "division_length: must exceed 2 × radius = 1 µm"),
 ])
+
+
 def test_simulate_settings_are_checked(change, message):
     from qpcontact.simulation.simulate import Settings
 
@@ -392,3 +394,58 @@ def simulate_args(argv):
     from qpcontact.cli import build_parser
 
     return build_parser("simulate").parse_args(["simulate", *argv])
+
+
+def test_a_target_that_cannot_be_reached_is_refused_and_a_short_run_says_so(tmp_path, capsys):
+    """issue 27: --rate 0 ran 2,000 steps of one cell and exited 0; a run stopped at --max-steps
+    short of --cells exited 0 without saying so."""
+    from qpcontact.cli import main
+
+    assert main(["simulate", "--rate", "0", "--cells", "10", "--out", str(tmp_path / "a"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "can never be reached at rate 0" in err
+    assert not (tmp_path / "a").exists()
+    assert main(["sweep", "--rate", "0", "--cells", "10", "--seeds", "1", "--out", str(tmp_path / "s"), "--quiet"]) == 2
+    assert "run seed-1: cells: the target of 10 cells can never be reached" in capsys.readouterr().err
+    with pytest.raises(InvalidArgumentError, match="never be reached"):
+        simulate.run_colony(simulate.Settings().updated({"rate": 0.0, "cells": 3}), progress=False)
+    # A model hook may set growth rates: then nothing is refused (here it sets none: the run ends short).
+    hook = tmp_path / "model.py"
+    hook.write_text("def hook(colony, step):\n    return None\n")
+    out = tmp_path / "b"
+    status = main(["simulate", "--rate", "0", "--cells", "3", "--max-steps", "4", "--hook", str(hook), "--out",
+                   str(out), "--quiet"])
+    assert status == simulate.EXIT_SHORT == 3
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "stopped at step 4 (--max-steps 4) with 1 of the 3 cells of --cells" in last
+    assert f"--resume --max-steps N --out {out}" in last
+    # One that reaches its target exits 0.
+    assert main(["simulate", "--cells", "2", "--out", str(tmp_path / "c"), "--quiet"]) == 0
+
+
+def test_the_documented_exit_statuses_are_the_codes():
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[2] / "docs" / "colony.md").read_text()
+    assert "130 for\n  Ctrl-C (SIGINT), 143 for SIGTERM" in text or "130 for Ctrl-C (SIGINT), 143 for SIGTERM" in text
+    assert "3 short of `--cells` at `--max-steps`" in text and simulate.EXIT_SHORT == 3
+
+
+def test_a_failed_step_ends_the_run_saying_what_to_try(tmp_path, monkeypatch, capsys):
+    """A run whose step fails (here: every solve of the position step stalls) says which flags to
+    change, with their values, and how to continue (issue 27: it said "stalled" and nothing else)."""
+    import dataclasses
+
+    from qpcontact.cli import main
+    from qpcontact.timestep import position
+
+    real = position.solve
+    monkeypatch.setattr(position, "solve", lambda *a, **k: dataclasses.replace(real(*a, **k), found=False,
+                                                                               status="stalled"))
+    assert main(["simulate", "--cells", "8", "--out", str(tmp_path / "run"), "--quiet"]) == 1
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "stalled" in last and "To try: smaller steps (--growth-per-step 0.025, or --max-halvings 5" in last
+    assert "--position-max-iterations 60" in last and "--position-solver (now ipm: mprgp or clarabel)" in last
+    assert last.endswith("continue with --resume")
+    settings = simulate.Settings().updated({"step": "velocity"})
+    assert "--velocity-tolerance (now 1e-06)" in simulate.flags_to_try(settings)

@@ -308,3 +308,26 @@ def test_snapshots_without_a_checksum_still_load(tmp_path):
     colony, step = load_colony(path)
     assert step == 4
     assert_same_colony(colony, a_colony())
+
+
+def test_saving_to_a_folder_or_saving_none_is_a_named_error(tmp_path):
+    """issue 28: save_colony given an existing folder wrote FOLDER.npz beside it; save_colony of
+    None raised an AttributeError."""
+    import qpcontact as qc
+    from qpcontact.colony import Colony
+    from qpcontact.errors import InvalidArgumentError
+    from qpcontact.io import save_colony
+    from qpcontact.io.snapshots import save_cells
+
+    colony = Colony.founder(qc.Cells([[0, 0, 0]], [1, 0, 0], [2.0], 0.5), 0.7)
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for save, what in ((save_colony, colony), (save_cells, colony.cells)):
+        with pytest.raises(InvalidArgumentError, match=r"path: .*run is a folder; give a file name"):
+            save(folder, what)
+        with pytest.raises(InvalidArgumentError, match="path: expected a file name"):
+            save(None, what)
+        with pytest.raises(InvalidArgumentError, match="expected .*, got NoneType"):
+            save(tmp_path / "x.npz", None)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # nothing written beside
+    assert save_colony(folder / "colony", colony) == folder / "colony.npz"

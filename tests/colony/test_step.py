@@ -188,3 +188,22 @@ def test_a_gap_within_the_margin_may_close_within_the_step_and_no_more(dt, close
     else:
         assert speed == pytest.approx(0.1 / dt, rel=1e-6)
         assert out.cells.centers[1, 0] - out.cells.centers[0, 0] == pytest.approx(1.0, abs=1e-7)  # touching
+
+
+def test_a_3d_loop_takes_the_3d_step_options():
+    """Settings().step_options() is the 2D run's (planar=True, refusing cells out of the plane);
+    a 3D loop takes step_options(dimensions=3), or the options of 3D settings: the substrate,
+    no planar reduction (issue 27: a 3D loop built from the README's line raised)."""
+    from qpcontact.errors import InvalidCellsError
+    from qpcontact.simulation import Settings
+
+    cells = q.Cells(centers=[[0, 0, 0.5], [0.2, 0.3, 1.3]], axes=[[1, 0, 0], [0, 0.6, 0.8]], lengths=2.0, radii=0.5,
+                    momenta=[[0, 0, 0.5], [0, 0, -0.5]])
+    with pytest.raises(InvalidCellsError, match="planar=True"):
+        step(cells, 0.02, **Settings().step_options())
+    for options in (Settings().step_options(dimensions=3), Settings().updated({"dimensions": 3}).step_options()):
+        assert options["planar"] is None and len(options["planes"]) == 1
+        assert step(cells, 0.02, **options).cells.n == 2
+    assert Settings().updated({"dimensions": 3}).step_options(dimensions=2)["planar"] is True
+    with pytest.raises(InvalidArgumentError, match="dimensions"):
+        Settings().step_options(dimensions=4)

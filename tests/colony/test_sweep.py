@@ -252,6 +252,54 @@ def _sweep_process(argv: list[str], log: Path) -> subprocess.Popen:
 
 
 @pytest.mark.slow
+def test_ctrl_c_in_a_terminal_stops_the_sweep_in_seconds_and_tells_each_runs_state(tmp_path):
+    """A terminal's Ctrl-C goes to the whole process group, the local cluster's workers
+    included (issue 27: they died of it, about 100 lines of Dask tracebacks, the sweep waited out
+    STOP_WAIT and called the runs they had cut short "not started"). Now the workers do not hear
+    it: the sweep stops them through its flag, each saving its state, well before STOP_WAIT, and
+    says truly where each run got to."""
+    out = tmp_path / "sweep"
+    log = tmp_path / "sweep.log"
+    process = subprocess.Popen([sys.executable, "-m", "qpcontact", "sweep", "--cells", "400", "--seeds", "1,2,3",
+                                "--workers", "2", "--snapshot-every", "5", "--out", str(out)], cwd=ROOT,
+                               stdout=log.open("w"), stderr=subprocess.STDOUT, preexec_fn=default_signals,
+                               start_new_session=True)  # its own process group, as a terminal's job
+    try:
+        wait_for(lambda: len(list(out.glob("runs/*/snapshots/step_000005.npz"))) == 2 or process.poll() is not None,
+                 "two runs past their snapshot of step 5", PATIENCE)
+        assert process.poll() is None, log.read_text()
+        signalled = time.monotonic()
+        os.killpg(process.pid, signal.SIGINT)
+        assert process.wait(PATIENCE) == 130, log.read_text()
+        took = time.monotonic() - signalled
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+    text = log.read_text()
+    assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
+    assert took < sweep.STOP_WAIT, text  # the runs answered the flag: nobody waited for dead workers
+    runs = {line.split(": ")[1]: line.split(": ", 2)[2] for line in text.splitlines() if line.startswith("  pending: ")}
+    assert sorted(runs) == ["seed-1", "seed-2", "seed-3"], text
+    started = [name for name in runs if attempts(out, name)]
+    assert len(started) >= 2, text
+    for name, said in runs.items():
+        assert (said == "not started") == (name not in started), (name, said)
+    assert "interrupted; continue with: qpcontact sweep --resume" in text
+
+
+def test_a_run_not_finished_is_said_to_be_started_or_not_from_its_folder(tmp_path):
+    folder = tmp_path / "run"
+    folder.mkdir()
+    assert sweep.progress_of(folder) == "not started"
+    (folder / sweep.ATTEMPTS_FILE).write_text('{"from_step": 0}\n')
+    assert sweep.progress_of(folder) == "started, cut short; no snapshot yet"
+    (folder / "snapshots").mkdir()
+    (folder / "snapshots" / "step_000010.npz").write_bytes(b"")
+    assert sweep.progress_of(folder) == "started, cut short; its latest snapshot: step 10"
+
+
+@pytest.mark.slow
 def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_path):
     """Ctrl-C stops the sweep (status 130); the run cut short continues from its snapshot; the
     finished runs are not run again. Deterministic: the second run is held at step 8 by its model

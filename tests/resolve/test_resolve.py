@@ -240,3 +240,19 @@ def test_the_plain_solve_answers_the_plain_problem_whatever_formulation_is_asked
     with pytest.raises(InvalidArgumentError, match="solver 'osqp' solves the least_squares and complementarity "
                                                    "formulations in primal and contact form only"):
         qc.resolve(cells, solver="osqp", formulation="linear")
+
+
+@pytest.mark.parametrize("n_cells", [40, 61])
+@pytest.mark.parametrize("form", ["primal", "contact"])
+def test_cvxopt_solves_least_squares_on_a_jammed_pile(n_cells, form):
+    """issue 28: cvxopt/least_squares failed ("Terminated (singular KKT matrix)", status
+    unknown) on a valid jammed pile whose B̃ has dependent rows (more contacts than unknowns) and
+    columns (61 cells: rigid motions no contact resists), where the other backends solve it. It
+    is solved again with a tiny ridge (qpsolvers_bridge.RIDGE), and says so."""
+    cells = scenes.jammed_packing(n_cells)
+    system = qc.resolve(cells, solver="clarabel", formulation="least_squares", tolerance=1e-9).system
+    assert np.linalg.matrix_rank(system.matrix.toarray()) < max(system.shape)
+    reference = qc.resolve(cells, solver="clarabel", formulation="least_squares", form=form, tolerance=1e-9)
+    result = qc.resolve(cells, solver="cvxopt", formulation="least_squares", form=form)
+    assert result.converged and "with a ridge of 1e-10" in result.status
+    assert metrics.distance(result.scaled_solution, reference.scaled_solution) < 1e-5
