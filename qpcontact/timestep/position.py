@@ -342,9 +342,9 @@ def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int, pair
         pairs = pairs[np.einsum("ij,ij->i", apart, apart) <= within * within]
     a, b, kind = select_contacts(cells, pairs, reach, always_closest=True)
     parts = [(a, b, kind)]
-    for j, plane in enumerate(planes):
+    for index, plane in enumerate(planes):
         found = plane_contacts(cells, [plane], reach)
-        parts.append((found.cell_a, np.full(len(found), -1 - j), found.kind))
+        parts.append((found.cell_a, np.full(len(found), -1 - index), found.kind))
     a, b, kind = (np.concatenate(x) for x in zip(*parts, strict=True))
     return _Tracked.of(a, b, kind, span)
 
