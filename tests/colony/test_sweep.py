@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from qpcontact import cli, cluster
-from qpcontact.ensembles import sweep
+from qpcontact import cli
+from qpcontact.ensembles import cluster, sweep
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.io.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
 from qpcontact.simulation.simulate import Settings, run_colony
