@@ -183,6 +183,10 @@ def test_every_documented_command_line_is_accepted_by_its_parser(line, capsys):
         parsed = parsed.replace(word, stand_in)
     argv = shlex.split(parsed)[1:]
     parser = cli.build_parser(argv[0])
+    if len(argv) == 1 and line not in QUOTED_AS_REFUSED:
+        # A command named alone (the README's table of commands) names it, whatever it needs.
+        assert argv[0] in cli.COMMANDS
+        return
     try:
         parser.parse_args(argv)
         status = 0
