@@ -85,10 +85,12 @@ class PositionSettings:
     overlap_tolerance: float = setting(
         0.01, unit="fraction of the pair's diameter ρ_a + ρ_b", above=0,
         help="largest overlap a step may leave beyond its target")
-    margin: float = setting(
-        0.5, unit="diameters", above=0,
+    margin: float | None = setting(
+        None, unit="diameters", above=0,
         help="reach of the contact search around the moved cells; pairs farther apart are not constraints in that "
-             "iteration")
+             "iteration. none: 0.75 in a monolayer, 0.5 in 3D (in grown 2D colonies of 10⁴-2·10⁴ cells a few cells "
+             "moved more than 0.5 relative to a neighbour in a step, and each such pair cost a whole linearization "
+             "more; in a 3D biofilm 0.75 made a step 1.3× dearer for nothing, docs/model-notes.md)")
     max_iterations: int = setting(30, unit="linearizations", at_least=1, help="cap on linearizations per step")
     turn_limit: float | None = setting(
         0.2, unit="diameters of that cell", above=0,
@@ -491,6 +493,13 @@ class _Progress:
     turn_limited: int = 0
 
 
+def _margin(settings: PositionSettings, planar: bool) -> float:
+    """The reach of the contact search [diameters]: the setting, or its default for the scene."""
+    if settings.margin is not None:
+        return settings.margin
+    return 0.75 if planar else 0.5
+
+
 def _checked(cells: Cells, dt: float, drive: np.ndarray | None, planes: Sequence[Plane], planar: bool | None,
              settings: PositionSettings | None, ids: np.ndarray | None, warm: ContactImpulses | None,
              motion: CellMotion | None, parents: np.ndarray | None, on_failure: str) -> tuple[PositionSettings, SolverSpec, np.ndarray, list[Plane], bool, np.ndarray]:
@@ -696,7 +705,7 @@ def position_step(
     form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
     times = {"detect": 0.0, "assemble": 0.0, "solve": 0.0}
     t_start = t0 = time.perf_counter()
-    reach = settings.margin * 2.0 * float(np.median(cells.radii)) if n else 0.0
+    reach = _margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if n else 0.0
     free = move(cells, dt, drive)
     predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
     first_pairs = _first_pairs(cells, free, predicted, reach)
