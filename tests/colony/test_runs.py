@@ -263,7 +263,13 @@ def test_toml_round_trip_is_exact():
                                                   "flag": True, "big": float("inf")}, "top": 1}
     import tomllib
 
-    assert tomllib.loads(write_toml(values, "two\nlines")) == values
+    # TOML has no null: a setting that is None (e.g. position.margin, "none: by the scene") is
+    # written as the word the settings read back as None.
+    def spelled(value):
+        return {k: spelled(v) for k, v in value.items()} if isinstance(value, dict) else ("none" if value is None else value)
+
+    assert tomllib.loads(write_toml(values, "two\nlines")) == spelled(values)
+    assert Settings.from_stored(tomllib.loads(write_toml(Settings().to_tables(), "")), "test") == Settings()
 
 
 @pytest.mark.parametrize("change, message", [
