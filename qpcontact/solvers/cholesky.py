@@ -26,9 +26,7 @@ from __future__ import annotations
 import contextlib
 import importlib
 import os
-import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from typing import Any
 
 import cvxopt
@@ -57,27 +55,6 @@ _CONTROLLER: list[Any] = []
 #: installed, else ``"cholmod"``. Module attribute, read when a matrix is made.
 BACKEND = "pardiso" if pypardiso is not None else "cholmod"
 
-@dataclass
-class Timings:
-    """Seconds spent, and calls made, in each part of the factorizations of this process (read
-    and reset by ``benchmarks/profile_step.py``): ``setup`` (pattern, ordering and symbolic
-    analysis of a new :class:`GramMatrix`), ``refill`` (the values for new weights), ``factor``
-    (numeric factorizations), ``solve`` (triangular solves)."""
-
-    seconds: dict[str, float] = field(default_factory=lambda: dict.fromkeys(("setup", "refill", "factor", "solve"), 0.0))
-    calls: dict[str, int] = field(default_factory=lambda: dict.fromkeys(("setup", "refill", "factor", "solve"), 0))
-
-    def add(self, part: str, since: float) -> None:
-        self.seconds[part] += time.perf_counter() - since
-        self.calls[part] += 1
-
-    def reset(self) -> None:
-        for part in self.seconds:
-            self.seconds[part], self.calls[part] = 0.0, 0
-
-
-#: The counters of this process (:class:`Timings`).
-TIMINGS = Timings()
 
 #: Below this many unknowns the ordering is CHOLMOD's (AMD): nested dissection pays only for
 #: large matrices, and METIS is not free (0.1–0.2 s at 10⁴ cells).
@@ -165,7 +142,6 @@ class GramMatrix:
     one about 78."""
 
     def __init__(self, matrix: sp.spmatrix) -> None:
-        t0 = time.perf_counter()
         csr = sp.csr_matrix(matrix)
         csr.sum_duplicates()
         csr.sort_indices()
@@ -206,7 +182,6 @@ class GramMatrix:
             self._permutation = _nested_dissection(csr)
         self._matrix: Any = None
         self._symbolic: Any = None
-        TIMINGS.add("setup", t0)
 
     def refresh(self, matrix: sp.spmatrix) -> bool:
         """Take the values of ``matrix`` if it has the pattern this was built for (then the
@@ -220,10 +195,8 @@ class GramMatrix:
 
     def values(self, w: np.ndarray, d: np.ndarray) -> np.ndarray:
         """The stored (lower-triangle, CSC-ordered) values for these weights."""
-        t0 = time.perf_counter()
         data = self._scatter @ w
         data[self.diagonal_position] += d
-        TIMINGS.add("refill", t0)
         return data
 
     def lower(self, w: np.ndarray, d: np.ndarray) -> sp.csc_matrix:
@@ -241,7 +214,6 @@ class GramMatrix:
         values = self.values(w, d)
         if self.backend == "pardiso":
             return self._factor_pardiso(values)
-        t0 = time.perf_counter()
         data = cvxopt.matrix(values)
         if self._matrix is None:
             self._matrix = cvxopt.spmatrix(data, self._rows, self._cols, self.shape)
@@ -256,21 +228,15 @@ class GramMatrix:
             finally:
                 cholmod.options.clear()
                 cholmod.options.update(saved)
-            TIMINGS.add("setup", t0)
-            t0 = time.perf_counter()
         else:
             self._matrix.V = data
         cholmod.numeric(self._matrix, self._symbolic)
-        TIMINGS.add("factor", t0)
         factor = self._symbolic
 
         def solve(v: np.ndarray) -> np.ndarray:
-            t1 = time.perf_counter()
             x = cvxopt.matrix(np.asarray(v, dtype=float))
             cholmod.solve(factor, x)
-            out = np.asarray(x).ravel()
-            TIMINGS.add("solve", t1)
-            return out
+            return np.asarray(x).ravel()
 
         return solve
 
@@ -280,7 +246,6 @@ class GramMatrix:
         indptr, indices = self._pattern
         upper = sp.csr_matrix((data, indices, indptr), shape=self.shape)
         if self._symbolic is None:
-            t0 = time.perf_counter()
             self._symbolic = pypardiso.PyPardisoSolver(mtype=2)
             # Its own parameters: nested dissection (METIS), and conditional numerical
             # reproducibility for the threads MKL uses: without it, the threads' order changes the
@@ -292,18 +257,8 @@ class GramMatrix:
             # unless it is told where it is: tell it, once found.
             os.environ.setdefault("PYPARDISO_MKL_RT", self._symbolic.libmkl._name)
             self._call(11, upper, np.zeros(self.shape[0]))
-            TIMINGS.add("setup", t0)
-        t0 = time.perf_counter()
         self._call(22, upper, np.zeros(self.shape[0]))
-        TIMINGS.add("factor", t0)
-
-        def solve(v: np.ndarray) -> np.ndarray:
-            t1 = time.perf_counter()
-            out = self._call(33, upper, np.asarray(v, dtype=float))
-            TIMINGS.add("solve", t1)
-            return out
-
-        return solve
+        return lambda v: self._call(33, upper, np.asarray(v, dtype=float))
 
     def _call(self, phase: int, upper: sp.csr_matrix, v: np.ndarray) -> np.ndarray:
         self._symbolic.set_phase(phase)
