@@ -422,3 +422,14 @@ def test_resolve_on_a_grown_state_needs_a_margin_as_documented():
     documented = len(qc.resolve(pushed, solver="clarabel", margin=0.05).contacts)
     assert near <= 0.1 * documented and documented >= cells.n
     assert "margin=0.05" in qc.resolve.__doc__
+
+
+def test_the_default_search_margin_is_075_diameters_in_a_monolayer_and_05_in_3d():
+    """PositionSettings.margin none: pairs 0.6 diameters apart are searched (and kept as
+    contacts) in a monolayer, not in 3D; a margin given is used as given."""
+    cells = rods([[0, 0, 0], [0, 1.6, 0]], [[1, 0, 0]] * 2, 2.0)  # radius 0.5: a gap of 0.6 diameters
+    assert PositionSettings().margin is None
+    assert len(position_step(cells, 0.01).contacts) > 0  # detected planar
+    assert len(position_step(cells, 0.01, planar=False).contacts) == 0
+    assert len(position_step(cells, 0.01, settings=PositionSettings(margin=0.5)).contacts) == 0
+    assert len(position_step(cells, 0.01, planar=False, settings=PositionSettings(margin=0.75)).contacts) > 0
