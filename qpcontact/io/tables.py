@@ -135,9 +135,8 @@ def history_columns(folder: str | Path) -> dict[str, np.ndarray]:
     run = RunFolder(Path(folder))
     if not run.history_path.is_file():
         raise OutputFolderError(f"{folder}: holds no history.csv (not a qpcontact run's folder)")
-    rows = run.read_history_rows()
-    return {name: np.array([float(row[name]) for row in rows], dtype=np.int64 if name in _COUNTS else float)
-            for name in HISTORY_FIELDS}
+    return {name: np.array(values, dtype=np.int64 if name in _COUNTS else float)
+            for name, values in run.read_history().items()}
 
 
 def snapshot_file(source: str | Path, snapshot: str | None = None) -> Path:
