@@ -32,20 +32,28 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import time
 from datetime import UTC, datetime
 from pathlib import Path
 
+from numpy import median
+
+from qpcontact.studies.grown import machine
+
 CHILD = r"""
 import json, sys, time
 import numpy as np
 import qpcontact.solvers.cholesky as cholesky
-from qpcontact.io import load_colony
-from qpcontact.simulation.settings import Settings
-from qpcontact.simulation.simulate import step_function
+try:
+    from qpcontact.io import load_colony
+    from qpcontact.simulation.settings import Settings
+    from qpcontact.simulation.simulate import step_function
+except ImportError:  # a version before the wings of issue 28
+    from qpcontact.colony import load_colony
+    from qpcontact.colony.settings import Settings
+    from qpcontact.colony.simulate import step_function
 
 spent = dict(setup=0.0, refill=0.0, factor=0.0, solve=0.0)
 counts = dict(setup=0, refill=0, factor=0, solve=0)
@@ -129,12 +137,6 @@ def phases(row: dict) -> dict[str, float]:
     return out
 
 
-def median(values: list[float]) -> float:
-    ordered = sorted(values)
-    middle = len(ordered) // 2
-    return ordered[middle] if len(ordered) % 2 else 0.5 * (ordered[middle - 1] + ordered[middle])
-
-
 def version() -> str:
     done = subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True, check=False,
                           cwd=Path(__file__).resolve().parent)
@@ -172,8 +174,7 @@ def main(argv: list[str] | None = None) -> None:
     for state in args.states:
         if not state.is_file():
             parser.error(f"no such state: {state}")
-    load = os.getloadavg()[0]
-    started = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    started, measured_on = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"), machine()
     results = {}
     for state in args.states:
         t = time.perf_counter()
@@ -181,22 +182,12 @@ def main(argv: list[str] | None = None) -> None:
         results[state.name] = result
         print(f"{state.name}: {time.perf_counter() - t:.0f} s", file=sys.stderr)
     text = (f"# One position step, phase by phase\n\n{started}, qpcontact {version()}, "
-            f"{os.cpu_count()} cores ({_cpu()}), load {load:.2f} at the start, "
+            f"{measured_on} at the start, "
             f"factorization {results[next(iter(results))]['rows'][0]['backend']}; "
             f"median of {args.steps} steps per state, each from the last (seconds, share of the step).\n\n"
             + table(results) + "\n")
     print(text)
     args.out.write_text(text)
-
-
-def _cpu() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "unknown CPU"
 
 
 if __name__ == "__main__":
