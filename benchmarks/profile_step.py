@@ -138,8 +138,12 @@ def phases(row: dict) -> dict[str, float]:
 
 
 def version() -> str:
+    """The commit of the qpcontact the children import (the checkout in the working folder, or
+    the installed one), not this script's."""
+    where = subprocess.run([sys.executable, "-c", "import os, qpcontact; print(os.path.dirname(qpcontact.__file__))"],
+                           capture_output=True, text=True, check=False).stdout.strip()
     done = subprocess.run(["git", "describe", "--always", "--dirty"], capture_output=True, text=True, check=False,
-                          cwd=Path(__file__).resolve().parent)
+                          cwd=where or None)
     return done.stdout.strip() or "unknown"
 
 
