@@ -88,6 +88,7 @@ from ..io.snapshots import Snapshot, load_snapshot
 from ..timestep.mechanics import CellMechanics, PressureGrowth
 from ..timestep.position import CellMotion, ContactImpulses, PositionStepResult
 from ..timestep.step import StepResult, largest_overlap
+from .ranks import CollectiveInterrupt, distributed_settings, processes
 from .settings import (
     COLORS,
     Settings,
@@ -399,7 +400,7 @@ def pressure_growth_of(settings: Settings) -> PressureGrowth | None:
 
 def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, progress: bool = True,
                folder: RunFolder | None = None, frame_growth: float = 0.0, hook: Hook | None = None,
-               pressure_growth: PressureGrowth | None = None) -> Run:
+               pressure_growth: PressureGrowth | None = None, comm: Any = None) -> Run:
     """Grow a colony until it has ``settings.run.cells`` cells (or reaches step
     ``settings.run.max_steps``).
 
@@ -424,6 +425,9 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
             ``settings.model.pressure_growth`` and ``settings.model.stall_pressure``
             (:func:`pressure_growth_of`), None when it is ``"off"`` (the run is then what it was
             without pressure-dependent growth, bit for bit).
+        comm: the MPI processes this run is split over (mpi4py communicator; every process calls
+            with the same arguments, the position solver ``ipm-petsc``, and only one of them
+            with a ``folder``: :mod:`qpcontact.simulation.ranks`); None: one process.
 
     Returns:
         A :class:`Run`. A failed contact solve, a step that cannot be taken (a cell compressed
@@ -443,7 +447,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     bar = tqdm(total=settings.run.cells, initial=state.colony.cells.n, unit="cell", disable=not progress,
                file=sys.stderr)
     t_start = time.perf_counter()
-    with Interrupt() as interrupt:
+    with (Interrupt() if comm is None else CollectiveInterrupt(comm)) as interrupt:
         while state.colony.cells.n < settings.run.cells and state.step < settings.run.max_steps \
                 and not interrupt.requested:
             t0 = time.perf_counter()
@@ -663,9 +667,11 @@ def configure(args: argparse.Namespace, snapshot: Snapshot | None, in_place: boo
     return settings
 
 
-def open_run(args: argparse.Namespace) -> tuple[Settings, Snapshot | None, RunFolder]:
+def open_run(args: argparse.Namespace, comm: Any = None) -> tuple[Settings, Snapshot | None, RunFolder | None, str]:
     """Read the start, settle the settings and open the output folder: every check a run needs
-    before it starts (so that nothing fails at its end)."""
+    before it starts (so that nothing fails at its end). Over MPI processes (``comm``), every
+    process reads the start and settles the settings (:func:`~.ranks.distributed_settings`, whose
+    note is returned), then process 0 alone opens the folder (the others get None)."""
     path = latest_snapshot(args.out) if args.resume else args.start
     snapshot = None if path is None else load_snapshot(path)
     in_place = snapshot is not None and is_inside(Path(path), args.out)
@@ -679,12 +685,25 @@ def open_run(args: argparse.Namespace) -> tuple[Settings, Snapshot | None, RunFo
     if settings.model.hook:
         load_hook(settings.model.hook)
     check_target(settings, initial_state(settings, snapshot)[0], settings.model.hook)
-    if snapshot is not None and in_place:
-        folder = RunFolder.resume(args.out, snapshot, overwrite=args.overwrite, vtk=settings.output.vtk)
-    else:
-        folder = RunFolder.create(args.out, overwrite=args.overwrite, vtk=settings.output.vtk,
-                                  first_step=0 if snapshot is None else max(snapshot.step, 0))
-    return settings, snapshot, folder
+    note = ""
+    if comm is not None:
+        settings, note = distributed_settings(settings, comm)
+        comm.Barrier()  # every process has read the start before process 0 opens the folder
+        if comm.Get_rank() != 0:
+            if not comm.bcast(None, root=0):
+                raise InvalidArgumentError("process 0 could not open the output folder (its message says why)")
+            return settings, snapshot, None, note
+    folder = None
+    try:
+        if snapshot is not None and in_place:
+            folder = RunFolder.resume(args.out, snapshot, overwrite=args.overwrite, vtk=settings.output.vtk)
+        else:
+            folder = RunFolder.create(args.out, overwrite=args.overwrite, vtk=settings.output.vtk,
+                                      first_step=0 if snapshot is None else max(snapshot.step, 0))
+    finally:
+        if comm is not None:  # the other processes wait for it (and stop if it failed)
+            comm.bcast(folder is not None, root=0)
+    return settings, snapshot, folder, note
 
 
 def describe_changes(before: Mapping[str, Any] | None, after: Settings) -> str:
@@ -703,11 +722,16 @@ def describe_changes(before: Mapping[str, Any] | None, after: Settings) -> str:
 def run_command(args: argparse.Namespace) -> int:
     from ..outputs import describe_written
 
+    comm = processes()  # None unless launched on several MPI processes
     try:
-        settings, snapshot, folder = open_run(args)  # a QPContactError here: exit 2 (run_checked)
+        settings, snapshot, folder, note = open_run(args, comm)  # a QPContactError here: exit 2 (run_checked)
     except KeyboardInterrupt:
         print("qpcontact simulate: interrupted before the run started", file=sys.stderr)
         return 130
+    if folder is None:  # a process of a distributed run other than the first: it steps, process 0 writes
+        return exit_status(run_colony(settings, start=snapshot, progress=False, comm=comm), settings)
+    if note:
+        print(note, file=sys.stderr)
     folder.write_config(settings.to_tables(applying=True),
                         f"qpcontact simulate settings, {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: those that apply to "
                         "this run (every snapshot holds them all)"
@@ -718,7 +742,7 @@ def run_command(args: argparse.Namespace) -> int:
         print(f"continuing from {snapshot.path} (step {snapshot.step}, t = {snapshot.colony.time:.4g}, "
               f"{snapshot.colony.cells.n} cells)" + (f"; settings changed: {changes}" if changes else ""), file=sys.stderr)
     result = run_colony(settings, start=snapshot, progress=not args.quiet, folder=folder,
-                        frame_growth=1.08 if settings.output.gif else 0.0)
+                        frame_growth=1.08 if settings.output.gif else 0.0, comm=comm)
     try:
         draw_pictures(folder, settings, result, gif=settings.output.gif, color=settings.output.color)
     except KeyboardInterrupt:
@@ -732,21 +756,29 @@ def run_command(args: argparse.Namespace) -> int:
           f"{max(history['max_overlap'], default=0.0):.4f} of a diameter; {settings.describe_step()}: contact solve "
           f"{np.sum(result.history['solve_seconds']):.1f} s; {settings.describe_growth()}")
     print(describe_written(folder.written))
+    status = exit_status(result, settings)
     if result.interrupted:
         print(f"qpcontact simulate: stopped by signal {result.interrupted} at step {result.steps}; continue with: "
               f"qpcontact simulate --resume --out {folder.path}", file=sys.stderr)
-        return 128 + result.interrupted
-    if result.error:
+    elif result.error:
         if isinstance(result.exception, ModelHookError) and result.exception.__cause__ is not None:
             traceback.print_exception(result.exception.__cause__, file=sys.stderr)
         print(f"qpcontact simulate: {result.error}", file=sys.stderr)
-        return 1
-    if result.colony.cells.n < settings.run.cells:
+    elif status == EXIT_SHORT:
         print(f"qpcontact simulate: stopped at step {result.steps} (--max-steps {settings.run.max_steps}) with "
               f"{result.colony.cells.n} of the {settings.run.cells} cells of --cells; continue with: qpcontact simulate "
               f"--resume --max-steps N --out {folder.path} (exit status {EXIT_SHORT})", file=sys.stderr)
-        return EXIT_SHORT
-    return 0
+    return status
+
+
+def exit_status(result: Run, settings: Settings) -> int:
+    """The exit status of a run: 128 + the signal that stopped it, 1 after an error,
+    :data:`EXIT_SHORT` when it stopped short of its cells, else 0."""
+    if result.interrupted:
+        return 128 + result.interrupted
+    if result.error:
+        return 1
+    return EXIT_SHORT if result.colony.cells.n < settings.run.cells else 0
 
 
 def describe_run(settings: Settings) -> str:

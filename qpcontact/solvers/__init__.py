@@ -36,6 +36,7 @@ example.
 from . import linear  # noqa: F401  (registers "linear")
 from . import mprgp  # noqa: F401  (registers "mprgp")
 from . import ipm  # noqa: F401  (registers "ipm")
+from . import petsc  # noqa: F401  (registers "ipm-petsc", usable where petsc4py is installed)
 from . import qpsolvers_bridge  # noqa: F401  (registers every qpsolvers backend)
 # isort: on
 from .blocks import BLOCK_ROWS, independent_blocks

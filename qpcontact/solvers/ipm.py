@@ -86,6 +86,30 @@ STEP_FRACTION = 0.995
 START_COMPLIANCE = 0.1
 
 
+class Reductions:
+    """The reductions of the vector work over every part of the rows and unknowns: here, in one
+    process, each is its own value. A distributed solve (:mod:`qpcontact.solvers.petsc`) holds
+    only its part of each vector and passes reductions over its processes, so that the one
+    algorithm below serves both (the step lengths, the complementarity and the error are the
+    only places where the parts meet, besides the products with ``B̃`` and the factorization)."""
+
+    def total(self, value: float) -> float:
+        """The sum of ``value`` over the parts."""
+        return value
+
+    def least(self, value: float) -> float:
+        """The smallest ``value`` of the parts."""
+        return value
+
+    def most(self, value: float) -> float:
+        """The largest ``value`` of the parts."""
+        return value
+
+
+#: The reductions of a solve in one process.
+SERIAL = Reductions()
+
+
 @dataclass(frozen=True)
 class _Rows:
     """The constraints ``Gỹ ≥ c`` as one list of rows: the ``K`` contact rows ``B̃ỹ ≥ b̃``, then
@@ -98,6 +122,12 @@ class _Rows:
     lower: np.ndarray  # (L,) columns with a lower bound
     upper: np.ndarray  # (U,) columns with an upper bound
     c: np.ndarray  # (K + L + U,) right-hand sides
+    reduce: Reductions = SERIAL  # over the parts of a distributed solve
+
+    @property
+    def m(self) -> int:
+        """The number of rows, over every part."""
+        return int(self.reduce.total(float(self.c.size)))
 
     @property
     def k(self) -> int:
@@ -137,26 +167,25 @@ class _Iterate:
         return _Iterate(self.y + primal * step.y, self.z + primal * step.z, self.v + dual * step.v)
 
 
-def _max_step(value: np.ndarray, change: np.ndarray) -> float:
+def _max_step(value: np.ndarray, change: np.ndarray, reduce: Reductions) -> float:
     """Largest ``t ≤ 1`` with ``value + t·change ≥ 0`` (``value > 0``): one pass, one temporary."""
-    if value.size == 0:
-        return 1.0
-    worst = float(np.min(change / value))
+    worst = reduce.least(float(np.min(change / value, initial=np.inf)))
     return 1.0 if worst >= -1.0 else -1.0 / worst
 
 
-def _lengths(x: _Iterate, d: _Iterate) -> tuple[float, float]:
+def _lengths(rows: _Rows, x: _Iterate, d: _Iterate) -> tuple[float, float]:
     """Largest primal and dual step lengths (≤ 1) that keep slacks and multipliers ≥ 0."""
-    return _max_step(x.z, d.z), _max_step(x.v, d.v)
+    return _max_step(x.z, d.z, rows.reduce), _max_step(x.v, d.v, rows.reduce)
 
 
-def _complementarity(x: _Iterate, d: _Iterate | None = None, primal: float = 0.0, dual: float = 0.0) -> float:
+def _complementarity(rows: _Rows, x: _Iterate, d: _Iterate | None = None, primal: float = 0.0,
+                     dual: float = 0.0) -> float:
     """Mean complementarity product ``vᵀz/m`` of the iterate moved by ``d`` (if given), from four
     dot products: no moved iterate is built for a scalar."""
     total = float(x.v @ x.z)
     if d is not None:
         total += primal * float(x.v @ d.z) + dual * float(d.v @ x.z) + primal * dual * float(d.v @ d.z)
-    return total / max(x.v.size, 1)
+    return rows.reduce.total(total) / max(rows.m, 1)
 
 
 class _Newton:
@@ -293,10 +322,11 @@ def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | 
     has_lo, has_hi = np.isfinite(lo), np.isfinite(hi)
     margin = np.where(has_lo & has_hi, 0.01 * (hi - lo), 0.01)
     inside = (np.where(has_lo, lo + margin, -np.inf), np.where(has_hi, hi - margin, np.inf))
+    reduce = rows.reduce
     if initial is not None:
         lam = np.maximum(np.asarray(initial, dtype=float), 0.0)
         y = np.clip(Bt @ lam, *inside)
-        scale = max(1.0, float(lam.max(initial=0.0)))
+        scale = max(1.0, reduce.most(float(lam.max(initial=0.0))))
         z = np.maximum(rows.apply(y) - rows.c, np.concatenate([np.full(k, warm_shift), margin[rows.lower],
                                                                 margin[rows.upper]]))
         v = np.concatenate([np.maximum(lam, warm_shift * scale), np.ones(rows.lower.size + rows.upper.size)])
@@ -312,10 +342,10 @@ def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | 
     y = np.clip(free, *inside)
     z = rows.apply(y) - rows.c
     v = np.concatenate([lam, np.maximum(y - free, 0.0)[rows.lower], np.maximum(free - y, 0.0)[rows.upper]])
-    z += max(-1.5 * float(z.min(initial=0.0)), 0.0)
-    v += max(-1.5 * float(v.min(initial=0.0)), 0.0)
-    product = float(z @ v)
-    z_sum, v_sum = float(z.sum()), float(v.sum())
+    z += max(-1.5 * reduce.least(float(z.min(initial=0.0))), 0.0)
+    v += max(-1.5 * reduce.least(float(v.min(initial=0.0))), 0.0)
+    product = reduce.total(float(z @ v))
+    z_sum, v_sum = reduce.total(float(z.sum())), reduce.total(float(v.sum()))
     z += 0.5 * product / max(v_sum, 1e-300) + 1e-3
     v += 0.5 * product / max(z_sum, 1e-300) + 1e-3
     return _Iterate(y, z, v)
@@ -324,8 +354,7 @@ def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | 
 def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upper: np.ndarray | None,
              tolerance: float, max_iterations: int | None, time_limit: float | None, initial: np.ndarray | None,
              warm_shift: float, space: str) -> IterativeSolution:
-    """The iterations of :func:`interior_point`: each one error, one factorization, a predictor,
-    a corrector and up to :data:`CORRECTORS` centrality correctors."""
+    """:func:`interior_point` in one process: its rows and normal matrix, then :func:`iterate_rows`."""
     check_options(tolerance, max_iterations, time_limit)
     if space not in ("auto", "unknowns", "contacts"):
         raise InvalidArgumentError(f"space: expected 'auto', 'unknowns' or 'contacts', got {space!r}")
@@ -337,14 +366,36 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
     hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
     if lo.shape != (n,) or hi.shape != (n,):
         raise InvalidArgumentError(f"bounds: expected shape ({n},), got lower {lo.shape}, upper {hi.shape}")
-    if np.any(lo > hi):
+    rows = make_rows(B, B.T.tocsr(), b, lo, hi, SERIAL)
+    if rows is None:
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
-    lower_columns, upper_columns = np.flatnonzero(np.isfinite(lo)), np.flatnonzero(np.isfinite(hi))
-    rows = _Rows(B, B.T.tocsr(), lower_columns, upper_columns,
-                 np.concatenate([b, lo[lower_columns], -hi[upper_columns]]))
-    cap = max_iterations or MAX_ITERATIONS
     # The normal matrices in the unknowns and in the contacts, made when first needed.
     normal: GramMatrix | None = None if space == "contacts" else _gram_matrix(B)
+    return iterate_rows(rows, normal, lo, hi, start=start, tolerance=tolerance, max_iterations=max_iterations,
+                        time_limit=time_limit, initial=initial, warm_shift=warm_shift, space=space)
+
+
+def make_rows(B: Any, Bt: Any, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, reduce: Reductions) -> _Rows | None:
+    """The rows of the problem (:class:`_Rows`) from ``B̃`` and ``B̃ᵀ`` (anything with ``@``: a
+    distributed solve passes its part of each), ``b̃`` and the bounds; None when a bound
+    interval is empty (in any part)."""
+    if reduce.most(float(np.any(lo > hi))):
+        return None
+    lower_columns, upper_columns = np.flatnonzero(np.isfinite(lo)), np.flatnonzero(np.isfinite(hi))
+    return _Rows(B, Bt, lower_columns, upper_columns, np.concatenate([b, lo[lower_columns], -hi[upper_columns]]),
+                 reduce)
+
+
+def iterate_rows(rows: _Rows, normal: Any, lo: np.ndarray, hi: np.ndarray, *, start: float, tolerance: float,
+                 max_iterations: int | None, time_limit: float | None, initial: np.ndarray | None,
+                 warm_shift: float, space: str) -> IterativeSolution:
+    """The iterations over ``rows`` (:func:`make_rows`) with the normal matrix in the unknowns
+    ``normal`` (:class:`~qpcontact.solvers.cholesky.GramMatrix`, or a distributed one with the
+    same ``factor``; None with ``space="contacts"``), from :func:`_start`: each one error, one
+    factorization, a predictor, a corrector and up to :data:`CORRECTORS` centrality correctors.
+    ``start`` is the :func:`time.perf_counter` the time limit counts from."""
+    k, reduce = rows.k, rows.reduce
+    cap = max_iterations or MAX_ITERATIONS
     contact_matrix: GramMatrix | None = GramMatrix(rows.Bt) if space == "contacts" else None
     x = _start(rows, normal, contact_matrix, lo, hi, initial, warm_shift)
     best_error, best, best_iteration = np.inf, x, 0
@@ -352,7 +403,7 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
     for iteration in range(cap + 1):
         gap = rows.apply(x.y) - rows.c
         r_dual = x.y - rows.transpose(x.v)
-        error = _error(x, gap, r_dual, k)
+        error = _error(rows, x, gap, r_dual)
         if error < best_error:
             best_error, best, best_iteration = error, x, iteration
         if error <= tolerance:
@@ -363,7 +414,7 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
         if iteration - best_iteration >= STALL_ITERATIONS:
             status = "stalled"
             break
-        if time_limit is not None and time.perf_counter() - start > time_limit:
+        if time_limit is not None and reduce.most(float(time.perf_counter() - start > time_limit)):
             status = "time_limit"
             break
         # Normal equations in the unknowns (the smaller and cheaper system) until the last
@@ -392,13 +443,14 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
 def _step(x: _Iterate, newton: _Newton) -> _Iterate:
     """One iteration's move: Mehrotra's predictor–corrector with Gondzio's centrality correctors,
     all with the one factorization of ``newton``."""
-    mu = _complementarity(x)
+    rows = newton.rows
+    mu = _complementarity(rows, x)
     products = x.v * x.z
     affine = newton.direction(-products)
-    sigma = min(1.0, (_complementarity(x, affine, *_lengths(x, affine)) / mu) ** 3) if mu > 0 else 0.0
+    sigma = min(1.0, (_complementarity(rows, x, affine, *_lengths(rows, x, affine)) / mu) ** 3) if mu > 0 else 0.0
     target = sigma * mu - products - affine.v * affine.z
     step = newton.direction(target)
-    primal, dual = _lengths(x, step)
+    primal, dual = _lengths(rows, x, step)
     box = (0.1 * sigma * mu, 10.0 * sigma * mu)
     for _ in range(CORRECTORS):
         # Gondzio's centrality corrector: aim at a longer step, pull the complementarity products
@@ -411,21 +463,22 @@ def _step(x: _Iterate, newton: _Newton) -> _Iterate:
         np.maximum(shift, -box[1], out=shift)
         shift += target
         better = newton.direction(shift)
-        p2, d2 = _lengths(x, better)
+        p2, d2 = _lengths(rows, x, better)
         if min(p2, d2) < 1.01 * min(primal, dual):
             break
         step, primal, dual, target = better, p2, d2, shift
     return x.moved(step, STEP_FRACTION * primal, STEP_FRACTION * dual)
 
 
-def _error(x: _Iterate, gap: np.ndarray, r_dual: np.ndarray, k: int) -> float:
+def _error(rows: _Rows, x: _Iterate, gap: np.ndarray, r_dual: np.ndarray) -> float:
     """The stopping measure of the module docstring: the largest of the violation of any row
     (penetration or bound), the complementarity ``|min(v/scale, gap)|`` of any row (impulses
     relative to the largest contact impulse) and the relative dual residual."""
-    scale = max(1.0, float(np.max(np.abs(x.v[:k]), initial=0.0)))
-    violation = max(0.0, -float(gap.min(initial=0.0)))
-    complementarity = float(np.max(np.abs(np.minimum(x.v / scale, gap)), initial=0.0))
-    dual = float(np.max(np.abs(r_dual), initial=0.0)) / max(1.0, float(np.max(np.abs(x.y), initial=0.0)))
+    most = rows.reduce.most
+    scale = max(1.0, most(float(np.max(np.abs(x.v[:rows.k]), initial=0.0))))
+    violation = max(0.0, -rows.reduce.least(float(gap.min(initial=0.0))))
+    complementarity = most(float(np.max(np.abs(np.minimum(x.v / scale, gap)), initial=0.0)))
+    dual = most(float(np.max(np.abs(r_dual), initial=0.0))) / max(1.0, most(float(np.max(np.abs(x.y), initial=0.0))))
     return max(violation, complementarity, dual)
 
 

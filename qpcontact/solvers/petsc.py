@@ -1,0 +1,306 @@
+"""ipm-petsc: the interior point of :mod:`.ipm` over MPI processes, on PETSc's distributed objects.
+
+Under ``mpiexec -n P``, every process holds the same problem (the colony's state and its contact
+system are replicated, docs/distributed.md); this solver splits it: the cells (the groups of
+columns of ``B̃`` with the same rows, :func:`~qpcontact.solvers.cholesky.column_groups`) are
+partitioned by METIS into P connected regions of the contact graph, each process owns the unknowns
+of its cells and the contact rows whose first cell is its own, and the iterations of
+:func:`qpcontact.solvers.ipm.iterate_rows` run on those parts:
+
+- the products with ``B̃`` and ``B̃ᵀ`` are PETSc's (an MPIAIJ matrix; the halo of unknowns that
+  a process's rows read from its neighbours is PETSc's scatter);
+- the normal matrix ``diag(d) + B̃ᵀ diag(w) B̃`` is PETSc's ``MatTransposeMatMult`` of the
+  row-scaled ``B̃`` (its pattern once per problem, its values each iteration), factorized by
+  MUMPS (Cholesky, its symbolic analysis once per problem);
+- the step lengths, the complementarity and the error are reductions over the processes
+  (:class:`_Reductions`: a reduction to process 0 then a broadcast, so that every process takes
+  the same branch with the same bits).
+
+The answer is gathered to every process, so that what follows (the acceptance checks, the
+motion of the cells) is the same everywhere. In one process the same code runs with P = 1 (the
+factorization is MUMPS's instead of CHOLMOD's). Only the normal equations in the unknowns are
+distributed: a tolerance below :data:`~qpcontact.solvers.ipm.UNKNOWNS_ACCURACY`, which needs the
+contact space's, is refused.
+
+Registered as ``"ipm-petsc"`` when petsc4py and mpi4py can be imported
+(``scripts/install-mpi``, docs/distributed.md).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import InvalidArgumentError
+from . import cholesky
+from .ipm import MAX_ITERATIONS, UNKNOWNS_ACCURACY, Reductions, iterate_rows, make_rows
+from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
+
+#: MUMPS's options for the Newton systems (PETSc's option names): the working space of the
+#: numeric phase 50 % above the analysis's estimate (its default 20 % failed a factorization of
+#: a grown colony with the error -9, "too little workspace", then analysed again).
+MUMPS_OPTIONS = {"mat_mumps_icntl_14": "50"}
+
+
+def installed() -> bool:
+    """petsc4py and mpi4py can be imported."""
+    return all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py"))
+
+
+def petsc() -> Any:
+    """petsc4py's ``PETSc`` module (MPI initialized on first use)."""
+    from petsc4py import PETSc
+
+    return PETSc
+
+
+def world() -> Any:
+    """The MPI communicator of the processes a distributed step runs on (mpi4py's
+    ``COMM_WORLD``, PETSc's world)."""
+    return petsc().COMM_WORLD.tompi4py()
+
+
+class _Reductions(Reductions):
+    """Reductions over the processes of ``comm``: to process 0, then broadcast (an all-reduce
+    may give processes results that differ in the last bit, and their branches would part)."""
+
+    def __init__(self, comm: Any) -> None:
+        from mpi4py import MPI
+
+        self.comm, self._ops = comm, {"total": MPI.SUM, "least": MPI.MIN, "most": MPI.MAX}
+
+    def _all(self, value: float, op: str) -> float:
+        return float(self.comm.bcast(self.comm.reduce(float(value), op=self._ops[op], root=0), root=0))
+
+    def total(self, value: float) -> float:
+        return self._all(value, "total")
+
+    def least(self, value: float) -> float:
+        return self._all(value, "least")
+
+    def most(self, value: float) -> float:
+        return self._all(value, "most")
+
+
+class Partition:
+    """Which process owns which columns (unknowns) and rows (contacts) of a (K, n) ``B̃``, and the
+    order that puts each process's part in one block (PETSc's distributed objects own ranges).
+
+    Columns go by cells (:func:`~qpcontact.solvers.cholesky.column_groups`), cells by METIS's
+    k-way partition of the cells' contact graph (computed by process 0, broadcast); a row goes
+    with the owner of its first column.
+
+    Attributes:
+        column_order: (n,) the columns in the order of the processes' blocks.
+        row_order: (K,) the rows likewise.
+        column_counts, row_counts: (P,) the size of each process's block.
+    """
+
+    def __init__(self, matrix: sp.csr_matrix, comm: Any) -> None:
+        size = comm.Get_size()
+        k, n = matrix.shape
+        owner = np.zeros(n, dtype=np.int64)
+        if size > 1:
+            owner = comm.bcast(_owners(matrix, size) if comm.Get_rank() == 0 else None, root=0)
+        first = matrix.indices[matrix.indptr[:-1]] if k else np.zeros(0, dtype=np.int64)
+        row_owner = owner[first]
+        self.column_order = np.argsort(owner, kind="stable")
+        self.row_order = np.argsort(row_owner, kind="stable")
+        self.column_counts = np.bincount(owner, minlength=size)
+        self.row_counts = np.bincount(row_owner, minlength=size)
+
+    def columns(self, rank: int) -> np.ndarray:
+        """The columns process ``rank`` owns, in its block's order."""
+        start = int(self.column_counts[:rank].sum())
+        return self.column_order[start:start + self.column_counts[rank]]
+
+    def rows(self, rank: int) -> np.ndarray:
+        """The rows process ``rank`` owns, in its block's order."""
+        start = int(self.row_counts[:rank].sum())
+        return self.row_order[start:start + self.row_counts[rank]]
+
+
+def _owners(matrix: sp.csr_matrix, parts: int) -> np.ndarray:
+    """(n,) the process of each column: METIS's k-way partition of the cells (contiguous blocks
+    of cells where METIS is missing or the graph too small)."""
+    group, graph = cholesky.column_groups(matrix)
+    groups = graph.shape[0]
+    if cholesky.pymetis is not None and groups > parts:
+        _, membership = cholesky.pymetis.part_graph(
+            parts, adjacency=cholesky.pymetis.CSRAdjacency(graph.indptr, graph.indices))
+        part = np.asarray(membership, dtype=np.int64)
+    else:
+        part = np.arange(groups, dtype=np.int64) * parts // max(groups, 1)
+    return part[group]
+
+
+class _Operator:
+    """``B̃`` (or ``B̃ᵀ``) on the parts of vectors a process owns: ``@`` as :class:`~.ipm._Rows`
+    uses it, by PETSc's distributed product (which brings the halo of unknowns)."""
+
+    def __init__(self, matrix: Any, transpose: bool) -> None:
+        self.matrix, self.transpose = matrix, transpose
+        right, left = matrix.createVecs()
+        self._in, self._out = (left, right) if transpose else (right, left)
+        self.shape = (self._out.getLocalSize(), self._in.getLocalSize())
+
+    def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        self._in.array[:] = x
+        (self.matrix.multTranspose if self.transpose else self.matrix.mult)(self._in, self._out)
+        return self._out.array.copy()
+
+
+class DistributedGram:
+    """``diag(d) + B̃ᵀ diag(w) B̃`` over the processes, refilled for each ``w ≥ 0`` and ``d > 0``
+    and factorized by MUMPS (Cholesky): :meth:`factor` is that of
+    :class:`~qpcontact.solvers.cholesky.GramMatrix`, on the parts each process owns."""
+
+    def __init__(self, matrix: Any) -> None:
+        PETSc = petsc()
+        self._B = matrix
+        self._scaled = matrix.duplicate(copy=True)
+        self._normal: Any = None
+        self._weights, self._diagonal = matrix.createVecs()[::-1]
+        self._ksp = PETSc.KSP().create(comm=matrix.getComm())
+        self._ksp.setType(PETSc.KSP.Type.PREONLY)
+        pc = self._ksp.getPC()
+        pc.setType(PETSc.PC.Type.CHOLESKY)
+        pc.setFactorSolverType(PETSc.Mat.SolverType.MUMPS)
+        options = PETSc.Options()
+        for key, value in MUMPS_OPTIONS.items():
+            options.setValue(key, value)
+        self._x, self._b = self._diagonal.duplicate(), self._diagonal.duplicate()
+
+    def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize for these weights (this process's rows of ``w``, columns of ``d``); returns
+        the solve on this process's part.
+
+        Raises:
+            ArithmeticError: MUMPS found the matrix not numerically positive definite.
+        """
+        PETSc = petsc()
+        self._B.copy(self._scaled, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self._weights.array[:] = np.sqrt(w)
+        self._scaled.diagonalScale(L=self._weights)
+        first = self._normal is None
+        self._normal = self._scaled.transposeMatMult(self._scaled, result=self._normal)
+        self._diagonal.array[:] = d
+        self._normal.setDiagonal(self._diagonal, addv=PETSc.InsertMode.ADD_VALUES)
+        if first:
+            self._normal.setOption(PETSc.Mat.Option.SPD, True)
+            self._ksp.setOperators(self._normal)
+            self._ksp.getPC().setFromOptions()
+        else:
+            self._ksp.setOperators(self._normal)
+        self._ksp.setUp()
+        status = self._ksp.getPC().getFactorMatrix().getMumpsInfog(1)  # the same on every process
+        if status < 0:  # -10: numerically singular; others: MUMPS's error codes
+            raise ArithmeticError(f"MUMPS: the factorization failed with INFOG(1) = {status}")
+
+        def solve(v: np.ndarray) -> np.ndarray:
+            self._b.array[:] = v
+            self._ksp.solve(self._b, self._x)
+            return self._x.array.copy()
+
+        return solve
+
+    def destroy(self) -> None:
+        """Free PETSc's objects (collective)."""
+        for obj in (self._ksp, self._normal, self._scaled, self._weights, self._diagonal, self._x, self._b):
+            if obj is not None:
+                obj.destroy()
+
+
+def _gather(part: np.ndarray, order: np.ndarray, counts: np.ndarray, comm: Any) -> np.ndarray:
+    """The whole vector, on every process, from each process's ``part`` of the block order ``order``."""
+    whole = np.empty(int(counts.sum()))
+    comm.Allgatherv(np.ascontiguousarray(part, dtype=float), [whole, counts])
+    out = np.empty_like(whole)
+    out[order] = whole
+    return out
+
+
+def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None = None,
+                               upper: np.ndarray | None = None, *, tolerance: float = 1e-4,
+                               max_iterations: int | None = None, time_limit: float | None = None,
+                               comm: Any = None) -> IterativeSolution:
+    """:func:`qpcontact.solvers.ipm.interior_point` over the processes of ``comm`` (default
+    :func:`world`): every process passes the same problem and gets the same answer (module
+    docstring).
+
+    Raises:
+        InvalidArgumentError: a tolerance below :data:`~qpcontact.solvers.ipm.UNKNOWNS_ACCURACY`
+            (only the normal equations in the unknowns are distributed), or bad bounds.
+    """
+    check_options(tolerance, max_iterations, time_limit)
+    if tolerance < UNKNOWNS_ACCURACY:
+        raise InvalidArgumentError(f"ipm-petsc: tolerance {tolerance:g} is below {UNKNOWNS_ACCURACY:g}, which only "
+                                   "the one-process ipm reaches (in the contact impulses)")
+    start = time.perf_counter()
+    comm = world() if comm is None else comm
+    PETSc = petsc()
+    B = sp.csr_matrix(matrix)
+    B.sort_indices()
+    k, n = B.shape
+    lo = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+    hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
+    if lo.shape != (n,) or hi.shape != (n,):
+        raise InvalidArgumentError(f"bounds: expected shape ({n},), got lower {lo.shape}, upper {hi.shape}")
+    partition = Partition(B, comm)
+    rank = comm.Get_rank()
+    mine, my_rows = partition.columns(rank), partition.rows(rank)
+    place = np.empty(n, dtype=np.int64)
+    place[partition.column_order] = np.arange(n)
+    local = B[my_rows]
+    local = sp.csr_matrix((local.data, place[local.indices], local.indptr), shape=local.shape)
+    local.sort_indices()
+    mat = PETSc.Mat().createAIJ(size=((my_rows.size, k), (mine.size, n)),
+                                csr=(local.indptr.astype(PETSc.IntType), local.indices.astype(PETSc.IntType),
+                                     local.data), comm=_petsc_comm(comm))
+    mat.assemble()
+    reduce = _Reductions(comm)
+    normal = DistributedGram(mat)
+    try:
+        rows = make_rows(_Operator(mat, False), _Operator(mat, True), np.asarray(rhs, dtype=float)[my_rows],
+                         lo[mine], hi[mine], reduce)
+        if rows is None:
+            return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf,
+                                     time.perf_counter() - start)
+        with cholesky.quiet_numpy():
+            part = iterate_rows(rows, normal, lo[mine], hi[mine], start=start, tolerance=tolerance,
+                                max_iterations=max_iterations or MAX_ITERATIONS, time_limit=time_limit,
+                                initial=None, warm_shift=1e-2, space="unknowns")
+    finally:
+        normal.destroy()
+        mat.destroy()
+    assert part.lam is not None
+    y = _gather(part.y, partition.column_order, partition.column_counts, comm)
+    lam = _gather(part.lam, partition.row_order, partition.row_counts, comm)
+    return IterativeSolution(y, lam, part.iterations, part.converged, part.status, part.residual,
+                             time.perf_counter() - start)
+
+
+def _petsc_comm(comm: Any) -> Any:
+    """PETSc's communicator over the processes of the mpi4py communicator ``comm``."""
+    return petsc().Comm(comm)
+
+
+def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
+           settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
+    out = distributed_interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
+                                     time_limit=time_limit, max_iterations=settings.get("max_iterations"))
+    return out.output()
+
+
+register(SolverSpec(
+    "ipm-petsc", formulations=("complementarity",), forms=("contact",), warm_start=False, time_limit=True,
+    solve=_solve, available=installed,
+    description="the built-in interior point over MPI processes (PETSc, MUMPS); takes bounds on ỹ",
+    settings=("max_iterations",), blockwise=False, bounds=("contact",),
+    install_hint="needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distributed.md)",
+))
