@@ -25,7 +25,8 @@ def run_example(name: str, *argv: str) -> int:
 
 def test_every_example_is_tested():
     tested = {"own_loop", "channel", "biofilm_paraview", "compare_solvers", "model_hook", "foreign_state",
-              "pressure_growth"}
+              "pressure_growth",
+              "mpi_loop"}  # under mpiexec: tests/mpi/test_distributed.py
     assert {p.stem for p in EXAMPLES.glob("*.py")} == tested
 
 

@@ -93,7 +93,7 @@ class CollectiveInterrupt(Interrupt):
     def requested(self) -> bool:
         """Whether any process has had a signal (collective: every process asks once a step);
         then every process takes it as its own, so that all end the run alike."""
-        number = int(self.comm.allreduce(self.signal or 0, op=_max()))
+        number = max(self.comm.allgather(self.signal or 0))
         if number:
             self.signal = number
         return bool(number)
@@ -104,9 +104,3 @@ class CollectiveInterrupt(Interrupt):
 
     def _handle(self, number: int, frame: Any) -> None:
         self.signal = number
-
-
-def _max() -> Any:
-    from mpi4py import MPI
-
-    return MPI.MAX

@@ -1,0 +1,32 @@
+"""Run under ``mpiexec -n P``: the QPs of a grown colony's position steps (with their bounds),
+solved by ipm in each process and by ipm-petsc over the processes; process 0 prints one line per
+QP, ``checked P STATUS DIFFERENCE`` (the largest difference of the answers, relative to the
+largest unknown). Used by test_distributed.py."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from qpcontact.simulation import Settings, run_colony
+from qpcontact.solvers import Problem, solve
+from qpcontact.solvers.ipm import interior_point
+from qpcontact.solvers.petsc import distributed_interior_point, world
+from qpcontact.timestep import position
+
+comm = world()
+problems: list[Problem] = []
+
+
+def capture(problem: Problem, *args, **kwargs):
+    problems.append(problem)
+    return solve(problem, *args, **kwargs)
+
+
+position.solve = capture  # the QPs of every linearization (the same in each process: same run)
+run_colony(Settings().updated({"cells": 300}), progress=False)
+for problem in problems[-3:]:
+    one = interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=1e-4)
+    split = distributed_interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=1e-4)
+    difference = float(np.max(np.abs(one.y - split.y))) / max(1.0, float(np.max(np.abs(one.y))))
+    if comm.Get_rank() == 0:
+        print(f"checked {comm.Get_size()} {split.status} {difference:.3g}", flush=True)

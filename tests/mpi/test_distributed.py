@@ -1,0 +1,146 @@
+"""One colony over two MPI processes (docs/distributed.md): runs under ``mpiexec -n 2``, checked
+against the same runs in one process.
+
+They need the distributed stack (``scripts/install-mpi VENV``: petsc4py, mpi4py, mpiexec). Where it
+is missing they are skipped, except under ``QPCONTACT_REQUIRE_MPI=1`` (``.ci/run`` sets it), where a
+missing stack fails them."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from qpcontact import load_colony
+from qpcontact.io.runs import latest_snapshot
+
+HERE = Path(__file__).parent
+STACK = all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py")) \
+    and shutil.which("mpiexec") is not None
+if not STACK:
+    if os.environ.get("QPCONTACT_REQUIRE_MPI") == "1":
+        raise RuntimeError("QPCONTACT_REQUIRE_MPI=1 but petsc4py, mpi4py or mpiexec is missing (scripts/install-mpi)")
+    pytest.skip("needs the distributed stack: scripts/install-mpi VENV (docs/distributed.md)", allow_module_level=True)
+
+#: The positions of two runs from the same state may differ by this much (of a diameter): the
+#: step's accuracy contract (its solver tolerance 10⁻⁴ gives ~3·10⁻⁴ of a diameter).
+CONTRACT = 1e-3
+
+
+def environment() -> dict[str, str]:
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", OMPI_MCA_rmaps_base_oversubscribe="1")
+    if os.geteuid() == 0:  # Open MPI refuses root unless told (CI machines run as root)
+        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
+    return env
+
+
+def simulate(*flags: str, processes: int = 1, check: bool = True) -> subprocess.CompletedProcess[str]:
+    """``qpcontact simulate FLAGS`` in one process or under ``mpiexec -n processes``."""
+    command = [sys.executable, "-m", "qpcontact", "simulate", "--quiet", *flags]
+    if processes > 1:
+        command = ["mpiexec", "-n", str(processes), *command]
+    done = subprocess.run(command, capture_output=True, text=True, env=environment(), timeout=600)
+    if check:
+        assert done.returncode in (0, 3), done.stderr[-3000:]
+    return done
+
+
+@pytest.fixture(scope="module")
+def grown(tmp_path_factory) -> dict[int, Path]:
+    """A grown 2D colony (about 400 cells) and a 3D biofilm (about 150), from one process."""
+    out = {}
+    for dimensions, cells in ((2, 400), (3, 150)):
+        folder = tmp_path_factory.mktemp(f"grown{dimensions}d")
+        simulate("--dimensions", str(dimensions), "--cells", str(cells), "--out", str(folder))
+        out[dimensions] = latest_snapshot(folder)
+    return out
+
+
+def steps_from(state: Path, folder: Path, steps: int, processes: int) -> subprocess.CompletedProcess[str]:
+    """``steps`` more steps of the run that saved ``state``, into ``folder``."""
+    start = int(state.stem.split("_")[1])
+    return simulate("--start", str(state), "--cells", "100000", "--max-steps", str(start + steps), "--out",
+                    str(folder), processes=processes)
+
+
+@pytest.mark.parametrize("dimensions", [2, 3])
+def test_two_processes_take_the_steps_of_one(grown, tmp_path, dimensions):
+    """From the same saved state, steps on two processes and in one give the same cells and ids,
+    end positions within the step's accuracy contract, and every state within the overlap
+    tolerance."""
+    one = steps_from(grown[dimensions], tmp_path / "one", 6, processes=1)
+    two = steps_from(grown[dimensions], tmp_path / "two", 6, processes=2)
+    assert "running on 2 MPI processes" in two.stderr and "ipm-petsc" in two.stdout
+    a, _ = load_colony(latest_snapshot(tmp_path / "one"))
+    b, _ = load_colony(latest_snapshot(tmp_path / "two"))
+    assert a.cells.n == b.cells.n and np.array_equal(a.ids, b.ids) and np.array_equal(a.parent_ids, b.parent_ids)
+    diameter = 2.0 * float(np.median(a.cells.radii))
+    tips = lambda c: np.concatenate([c.centers + 0.5 * c.lengths[:, None] * c.axes,  # noqa: E731
+                                     c.centers - 0.5 * c.lengths[:, None] * c.axes])
+    assert float(np.max(np.abs(tips(a.cells) - tips(b.cells)))) / diameter <= CONTRACT
+    for folder in (tmp_path / "one", tmp_path / "two"):
+        history = np.genfromtxt(folder / "history.csv", delimiter=",", names=True)
+        assert history["max_overlap"].size == 6 and np.all(history["max_overlap"] <= 0.01)
+    assert one.returncode == two.returncode == 3  # stopped by --max-steps, said
+
+
+#: How far two runs on two processes from the same state may part in a few steps [diameters]:
+#: MUMPS hands the rows of its large fronts to the processes by their load at run time, so the
+#: order of its sums, and the last bits, change from run to run (measured: 10⁻¹¹–10⁻¹⁰ over six
+#: steps, docs/distributed.md); in one process a resumed run is the same bit for bit.
+ROUNDING = 1e-8
+
+
+def test_a_distributed_run_resumes_to_rounding_and_writes_one_snapshot(grown, tmp_path):
+    """A run on two processes stopped and resumed follows the uninterrupted one to rounding (not
+    bit for bit: :data:`ROUNDING`); its snapshots are single files that load_colony reads, with
+    the cells' ids."""
+    straight = steps_from(grown[2], tmp_path / "straight", 6, processes=2)
+    assert straight.returncode == 3
+    steps_from(grown[2], tmp_path / "parts", 3, processes=2)
+    start = int(grown[2].stem.split("_")[1])
+    simulate("--resume", "--max-steps", str(start + 6), "--cells", "100000", "--out", str(tmp_path / "parts"),
+             processes=2)
+    a, _ = load_colony(latest_snapshot(tmp_path / "straight"))
+    b, _ = load_colony(latest_snapshot(tmp_path / "parts"))
+    assert np.array_equal(a.ids, b.ids)
+    diameter = 2.0 * float(np.median(a.cells.radii))
+    assert float(np.max(np.abs(a.cells.centers - b.cells.centers))) / diameter <= ROUNDING
+    assert float(np.max(np.abs(a.cells.axes - b.cells.axes))) <= ROUNDING
+    assert sorted(p.name for p in (tmp_path / "parts" / "snapshots").iterdir())[-1] == latest_snapshot(
+        tmp_path / "parts").name
+
+
+@pytest.mark.parametrize(("flags", "message"), [(("--position-solver", "clarabel"), "every process"),
+                                                (("--step", "velocity"), "--step position")])
+def test_what_two_processes_cannot_do_is_refused_before_the_run(tmp_path, flags, message):
+    done = simulate("--cells", "20", "--out", str(tmp_path / "run"), *flags, processes=2, check=False)
+    assert done.returncode == 2 and message in done.stderr
+    assert not (tmp_path / "run").exists()
+
+
+def test_the_distributed_interior_point_gives_the_answer_of_one_process(tmp_path):
+    """The QPs of grown colonies' steps, with bounds, solved on two processes: the same answer
+    as ipm's in one process (each process holds the whole answer)."""
+    done = subprocess.run(["mpiexec", "-n", "2", sys.executable, str(HERE / "solve_check.py")], capture_output=True,
+                          text=True, env=environment(), timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    lines = [line.split() for line in done.stdout.splitlines() if line.startswith("checked")]
+    assert len(lines) >= 3
+    for _, processes, status, difference in lines:
+        assert processes == "2" and status == "converged" and float(difference) < 1e-6
+
+
+def test_a_users_own_loop_runs_over_two_processes(tmp_path):
+    """examples/mpi_loop.py: a timestep loop of the user's own, with position_step, under mpiexec."""
+    example = HERE.parents[1] / "examples" / "mpi_loop.py"
+    done = subprocess.run(["mpiexec", "-n", "2", sys.executable, str(example), "--steps", "5"], capture_output=True,
+                          text=True, env=environment(), timeout=600, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "2 processes" in done.stdout and done.stdout.count("step ") == 5

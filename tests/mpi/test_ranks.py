@@ -1,0 +1,114 @@
+"""The parts of a run over MPI processes that need no MPI: how a launch is recognized, the
+settings of a distributed run, the partition of a problem, the collective stop (with a stand-in
+for the communicator). The runs themselves are in test_distributed.py."""
+
+from __future__ import annotations
+
+import signal
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from qpcontact import InvalidArgumentError
+from qpcontact.simulation import ranks
+from qpcontact.simulation.settings import Settings
+from qpcontact.solvers.petsc import Partition
+
+
+class FakeComm:
+    """The few calls the code makes of an mpi4py communicator, for ``size`` processes of which
+    this is ``rank``; ``others`` is what the other processes contribute to a reduction."""
+
+    def __init__(self, size: int = 2, rank: int = 0, others: int = 0) -> None:
+        self.size, self.rank, self.others = size, rank, others
+
+    def Get_size(self) -> int:
+        return self.size
+
+    def Get_rank(self) -> int:
+        return self.rank
+
+    def bcast(self, value, root=0):
+        return value
+
+    def allgather(self, value):
+        return [value, self.others]
+
+
+@pytest.mark.parametrize(("environment", "size"), [
+    ({}, 1), ({"OMPI_COMM_WORLD_SIZE": "4"}, 4), ({"PMI_SIZE": "2"}, 2), ({"SLURM_STEP_NUM_TASKS": "8"}, 8),
+    ({"OMPI_COMM_WORLD_SIZE": "x"}, 1)])
+def test_a_launch_is_recognized_from_the_environment(monkeypatch, environment, size):
+    for name in ranks.SIZE_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    for name, value in environment.items():
+        monkeypatch.setenv(name, value)
+    assert ranks.launched_size() == size
+
+
+def test_one_process_never_loads_mpi(monkeypatch):
+    for name in ranks.SIZE_VARIABLES:
+        monkeypatch.delenv(name, raising=False)
+    assert ranks.processes() is None
+
+
+def test_a_launch_without_the_stack_is_a_named_error(monkeypatch):
+    from qpcontact.solvers import petsc
+
+    monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")
+    monkeypatch.setattr(petsc, "installed", lambda: False)
+    with pytest.raises(InvalidArgumentError, match="scripts/install-mpi"):
+        ranks.processes()
+
+
+@pytest.mark.parametrize(("values", "match"), [({"position.solver": "clarabel"}, "every process"),
+                                               ({"step": "velocity"}, "--step position")])
+def test_what_a_distributed_run_cannot_do_is_refused(values, match):
+    with pytest.raises(InvalidArgumentError, match=match):
+        ranks.distributed_settings(Settings().updated(values), FakeComm(2))
+
+
+def test_a_signal_on_any_process_stops_every_process_at_the_end_of_the_step():
+    quiet = ranks.CollectiveInterrupt(FakeComm(2, others=0))
+    assert not quiet.requested
+    told = ranks.CollectiveInterrupt(FakeComm(2, others=int(signal.SIGTERM)))
+    assert told.requested and told.signal == signal.SIGTERM
+    with told.armed():
+        told._handle(signal.SIGINT, None)  # no KeyboardInterrupt in the middle of a step
+    assert told.signal == signal.SIGINT
+
+
+def _cells_matrix(cells: int, seed: int = 0) -> sp.csr_matrix:
+    """A contact matrix of a chain of cells with 3 unknowns each (rows: neighbours)."""
+    rng = np.random.default_rng(seed)
+    rows, cols, vals = [], [], []
+    for k in range(cells - 1):
+        for cell, sign in ((k, 1.0), (k + 1, -1.0)):
+            for slot in range(3):
+                rows.append(k)
+                cols.append(3 * cell + slot)
+                vals.append(sign * rng.uniform(0.5, 1.0))
+    return sp.csr_matrix((vals, (rows, cols)), shape=(cells - 1, 3 * cells))
+
+
+def test_the_partition_keeps_cells_whole_and_rows_with_their_first_cell():
+    matrix = _cells_matrix(400)
+    part = Partition(matrix, FakeComm(2))
+    assert part.column_counts.sum() == matrix.shape[1] and part.row_counts.sum() == matrix.shape[0]
+    assert np.all(part.column_counts > 0.3 * matrix.shape[1])  # balanced
+    owner = np.empty(matrix.shape[1], dtype=int)
+    for rank in range(2):
+        owner[part.columns(rank)] = rank
+    assert np.all(owner.reshape(-1, 3) == owner.reshape(-1, 3)[:, :1])  # a cell's unknowns together
+    for rank in range(2):
+        rows = part.rows(rank)
+        assert np.all(owner[matrix.indices[matrix.indptr[rows]]] == rank)
+    assert sorted(np.concatenate([part.rows(0), part.rows(1)])) == list(range(matrix.shape[0]))
+
+
+def test_one_process_owns_everything_in_its_order():
+    matrix = _cells_matrix(50)
+    part = Partition(matrix, FakeComm(1))
+    assert np.array_equal(part.columns(0), np.arange(matrix.shape[1]))
+    assert np.array_equal(part.rows(0), np.arange(matrix.shape[0]))
