@@ -744,7 +744,8 @@ def run_command(args: argparse.Namespace) -> int:
     result = run_colony(settings, start=snapshot, progress=not args.quiet, folder=folder,
                         frame_growth=1.08 if settings.output.gif else 0.0, comm=comm)
     try:
-        draw_pictures(folder, settings, result, gif=settings.output.gif, color=settings.output.color)
+        if not (result.interrupted and comm is not None):  # mpiexec kills its processes soon after a signal
+            draw_pictures(folder, settings, result, gif=settings.output.gif, color=settings.output.color)
     except KeyboardInterrupt:
         print("qpcontact simulate: interrupted while drawing; the snapshot and the history are saved", file=sys.stderr)
         return 130

@@ -144,3 +144,29 @@ def test_a_users_own_loop_runs_over_two_processes(tmp_path):
                           text=True, env=environment(), timeout=600, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "2 processes" in done.stdout and done.stdout.count("step ") == 5
+
+
+def test_ctrl_c_of_mpiexec_saves_the_state_reached_on_every_process(tmp_path):
+    """mpiexec turns Ctrl-C into SIGTERM for its processes: they end the step they are in (none
+    is left waiting in a solve), process 0 saves the state reached and says how to resume; the
+    resumed run goes on from it."""
+    import signal
+    import time
+
+    folder = tmp_path / "run"
+    command = ["mpiexec", "-n", "2", sys.executable, "-m", "qpcontact", "simulate", "--quiet", "--cells", "5000",
+               "--out", str(folder)]
+    run = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=environment())
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and (not (folder / "history.csv").is_file()
+                                           or len((folder / "history.csv").read_text().splitlines()) < 30):
+        time.sleep(0.2)
+    run.send_signal(signal.SIGINT)
+    _, stderr = run.communicate(timeout=120)
+    assert "stopped by signal" in stderr and "--resume" in stderr, stderr[-3000:]
+    rows = len((folder / "history.csv").read_text().splitlines()) - 1
+    state = latest_snapshot(folder)
+    assert int(state.stem.split("_")[1]) == rows  # the last step taken is saved
+    done = simulate("--resume", "--max-steps", str(rows + 2), "--out", str(folder), processes=2)
+    assert done.returncode == 3
+    assert len((folder / "history.csv").read_text().splitlines()) - 1 == rows + 2
