@@ -14,7 +14,9 @@ the run's own step function (``simulate``'s), each from the last:
 - *weak scaling*: ``2d-10000`` on one process against ``2d-20000`` on two;
 - *memory*: each process's peak resident memory (``ru_maxrss``) at the end;
 - *agreement*: the end positions of ``--steps`` steps on two processes against one process's, in
-  diameters (the tips of every cell), and the cells' ids.
+  diameters (the tips of every cell), and the cells' ids;
+- *alike runs* (``--grow N``): whole 2D runs from one cell to N cells in one process and on two:
+  wall time, steps, time to size, largest overlap, the radial pressure profile.
 
 Prints a Markdown table and writes it to ``--out`` (default ``./mpi-scaling.md``), with the date, the
 commit, the machine and its load.
@@ -114,6 +116,41 @@ def apart(one: Path, two: Path) -> tuple[bool, float]:
     return same, float(np.max(np.abs(a["tips"] - b["tips"]))) / float(a["diameter"]) if same else float("nan")
 
 
+def alike(cells: int, scratch: Path) -> list[str]:
+    """Whole runs from one cell to ``cells`` (2D, ``simulate``'s defaults) in one process and on
+    two: their wall time, steps, time to size, largest overlap and radial pressure profile."""
+    import numpy as np
+
+    from qpcontact.io import load_snapshot
+    from qpcontact.io.runs import latest_snapshot
+    from qpcontact.timestep.mechanics import radial_profile
+
+    runs = {}
+    for label, processes in (("one process (ipm)", 1), ("2 MPI processes (ipm-petsc)", 2)):
+        folder = scratch / f"grow-{processes}"
+        command = [sys.executable, "-m", "qpcontact", "simulate", "--quiet", "--cells", str(cells), "--out", str(folder)]
+        if processes > 1:
+            command = ["mpiexec", "-n", str(processes), *command]
+        t = time.perf_counter()
+        done = subprocess.run(command, capture_output=True, text=True, check=False, env=environment())
+        wall = time.perf_counter() - t
+        if done.returncode != 0:
+            raise SystemExit(f"the run to {cells} cells on {processes} failed:\n{done.stderr[-3000:]}")
+        snapshot = load_snapshot(latest_snapshot(folder))
+        history = np.genfromtxt(folder / "history.csv", delimiter=",", names=True)
+        assert snapshot.mechanics is not None
+        profile = radial_profile(snapshot.colony.cells, snapshot.mechanics.pressure, bins=10)
+        runs[label] = (wall, snapshot, float(np.max(history["max_overlap"])), profile)
+        print(f"grown to {cells} on {processes}: {wall:.0f} s", file=sys.stderr)
+    lines = [f"Whole runs, one cell to {cells:,} (2D, simulate's defaults), one process against two:\n",
+             "| run on | wall [s] | steps | cells | time [doubling times] | largest overlap | "
+             "mean pressure by tenth of the radius, centre to edge |", "|---|---:|---:|---:|---:|---:|---|"]
+    for label, (wall, snapshot, overlap, profile) in runs.items():
+        lines.append(f"| {label} | {wall:.1f} | {snapshot.step} | {snapshot.colony.cells.n:,} | "
+                     f"{snapshot.colony.time:.3f} | {overlap:.4f} | " + ", ".join(f"{m:.3g}" for m in profile.mean) + " |")
+    return lines
+
+
 CONFIGURATIONS = (("one process, ipm", "ipm", 1), ("1 MPI process, ipm-petsc", "ipm-petsc", 1),
                   ("2 MPI processes, ipm-petsc", "ipm-petsc", 2))
 
@@ -122,6 +159,9 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--states", type=Path, required=True, help="folder of grown colonies (bench-grown's cache)")
     parser.add_argument("--steps", type=int, default=3, help="steps timed per measurement, median kept (default: 3)")
+    parser.add_argument("--grow", type=int, default=0,
+                        help="also grow a 2D colony from one cell to this many cells in one process and on two, "
+                             "and compare the runs (default: 0, not run)")
     parser.add_argument("--out", type=Path, default=Path("mpi-scaling.md"),
                         help="the Markdown table written (default: ./mpi-scaling.md)")
     args = parser.parse_args(argv)
@@ -180,6 +220,8 @@ def main(argv: list[str] | None = None) -> None:
         lines += ["\nAgreement, from the same state, steps on 2 MPI processes (ipm-petsc) against one process (ipm):\n",
                   "| state | steps | same cells and ids | largest tip distance [diameters] |", "|---|---:|---|---:|",
                   *agreement]
+    if args.grow:
+        lines += ["", *alike(args.grow, scratch)]
     text = "\n".join(lines) + "\n"
     print(text)
     args.out.write_text(text)

@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     for i in range(args.steps):
         drive = -4.0 * cells.masses[:, None] * np.column_stack([cells.centers, np.zeros((cells.n, 4))])
         drive[:, 2] = 0.0  # stay in the plane
-        out = qc.position_step(cells, args.dt, drive=drive, settings=settings)
+        out = qc.position_step(cells, args.dt, drive=drive, settings=settings, comm=comm)
         cells = out.cells
         if comm.Get_rank() == 0:
             print(f"step {i}: {len(out.contacts)} contacts, largest overlap {out.max_overlap:.4f} of a diameter, "

@@ -427,7 +427,7 @@ def grow(colony: Colony, dt: float, *, dynamics: str = "overdamped", drive: np.n
 def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None, planes: Sequence[Plane] = (),
                   planar: bool | None = None, settings: PositionSettings | None = None,
                   warm: ContactImpulses | None = None, motion: CellMotion | None = None,
-                  on_failure: str = "raise") -> tuple[Colony, PositionStepResult]:
+                  on_failure: str = "raise", comm: Any = None) -> tuple[Colony, PositionStepResult]:
     """One growth step with the position-level :func:`qpcontact.colony.position_step`
     (overdamped; no division: call :func:`divide` before it, so that the step clears the
     overlap the daughters' axis noise makes and the state it returns keeps its tolerance).
@@ -438,7 +438,8 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
     and ``result.motion`` (contact impulses and cell motion keyed by the colony's cell ids;
     daughters born since move with their mother in the prediction). A step that does not converge is not applied: it raises
     :class:`~qpcontact.errors.StepFailedError` (``on_failure="raise"``) or returns the colony
-    unchanged with the unconverged result (``on_failure="return"``).
+    unchanged with the unconverged result (``on_failure="return"``). ``comm``: the MPI processes
+    the step's solves are split over (:func:`position_step`'s).
     """
     cells = colony.cells
     increase, paid = growth_step(colony, dt)
@@ -447,7 +448,7 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
         raise InvalidArgumentError(f"drive: expected shape ({cells.n}, 7) (p, L, g per cell), got {full.shape}")
     full[:, 6] = growth_drive(cells, increase, dt)
     out = position_step(cells, dt, drive=full, planes=planes, planar=planar, settings=settings, ids=colony.ids,
-                        warm=warm, motion=motion, parents=colony.parent_ids, on_failure=on_failure)
+                        warm=warm, motion=motion, parents=colony.parent_ids, on_failure=on_failure, comm=comm)
     if not out.converged:
         return colony, out
     grown = _grown(colony, cells, out.cells, paid, dt)

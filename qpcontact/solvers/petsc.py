@@ -293,7 +293,8 @@ def _petsc_comm(comm: Any) -> Any:
 def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
            settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
     out = distributed_interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
-                                     time_limit=time_limit, max_iterations=settings.get("max_iterations"))
+                                     time_limit=time_limit, max_iterations=settings.get("max_iterations"),
+                                     comm=settings.get("comm"))
     return out.output()
 
 
@@ -301,6 +302,6 @@ register(SolverSpec(
     "ipm-petsc", formulations=("complementarity",), forms=("contact",), warm_start=False, time_limit=True,
     solve=_solve, available=installed,
     description="the built-in interior point over MPI processes (PETSc, MUMPS); takes bounds on ỹ",
-    settings=("max_iterations",), blockwise=False, bounds=("contact",),
+    settings=("max_iterations", "comm"), blockwise=False, bounds=("contact",),
     install_hint="needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distributed.md)",
 ))

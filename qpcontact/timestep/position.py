@@ -50,6 +50,7 @@ import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -604,7 +605,7 @@ def _first_pairs(cells: Cells, now: Cells, predicted: Cells | None, reach: float
 
 
 def _solve(progress: _Progress, system: ContactSystem, problem: Problem, spec: SolverSpec, form: str,
-           settings: PositionSettings, ids: np.ndarray, times: dict[str, float]) -> str:
+           settings: PositionSettings, ids: np.ndarray, times: dict[str, float], comm: Any = None) -> str:
     """Solve one linearization's QP and take its answer into ``progress``; why not, if it was
     not taken. An answer is taken only when its solver stands by it and it passes the acceptance
     checks of every answer (resolve's, with the bounds): a stalled answer within the acceptance
@@ -613,7 +614,8 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, spec: S
     initial = system.from_contact_impulses(progress.last.lookup(key_a, key_b, progress.found.kind)) \
         if spec.warm_start else None
     t0 = time.perf_counter()
-    out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial)
+    out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial,
+                settings=None if comm is None else {"comm": comm})
     times["solve"] += time.perf_counter() - t0
     progress.solver_iterations += out.iterations or 0
     refused = "" if out.y is None or not out.found else acceptance_failure(
@@ -661,6 +663,7 @@ def position_step(
     motion: CellMotion | None = None,
     parents: np.ndarray | None = None,
     on_failure: str = "raise",
+    comm: Any = None,
 ) -> PositionStepResult:
     """Advance overdamped cells by ``dt`` with non-penetration at the end of the step (module
     docstring). The phases of each linearization: move the cells (:func:`move`), find and
@@ -690,6 +693,10 @@ def position_step(
             with its mother in that prediction (``motion``); None: such cells stay.
         on_failure: ``"raise"`` a :class:`~qpcontact.errors.StepFailedError` when the step does
             not converge (default), or ``"return"`` the unconverged result.
+        comm: the MPI processes the solves are split over (an mpi4py communicator; solver
+            ``"ipm-petsc"``, and every process of ``comm`` calls with the same arguments and gets
+            the same result: docs/distributed.md); None: the solver's own (``ipm-petsc``: all of
+            MPI's world).
 
     Returns:
         A :class:`PositionStepResult`.
@@ -701,6 +708,8 @@ def position_step(
     """
     settings, spec, drive, planes, planar, ids = _checked(cells, dt, drive, planes, planar, settings, ids, warm,
                                                           motion, parents, on_failure)
+    if comm is not None and spec.name != "ipm-petsc":
+        raise InvalidArgumentError(f"comm: only the solver ipm-petsc splits a step among processes; got {spec.name!r}")
     n, span = cells.n, cells.n + len(planes) + 1
     form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
     times = {"detect": 0.0, "assemble": 0.0, "solve": 0.0}
@@ -743,7 +752,7 @@ def position_step(
         if linear is None:  # nothing asks for a push: the free motion is the answer
             progress.impulses, progress.last = np.zeros((n, 7)), ContactImpulses.empty()
             continue
-        message = _solve(progress, *linear, spec, form, settings, ids, times)
+        message = _solve(progress, *linear, spec, form, settings, ids, times, comm)
         if message:
             message = f"{settings.solver} failed at linearization {iteration}: {message}"
             break

@@ -112,3 +112,12 @@ def test_one_process_owns_everything_in_its_order():
     part = Partition(matrix, FakeComm(1))
     assert np.array_equal(part.columns(0), np.arange(matrix.shape[1]))
     assert np.array_equal(part.rows(0), np.arange(matrix.shape[0]))
+
+
+def test_a_communicator_is_for_the_distributed_solver_only():
+    import qpcontact as qc
+
+    cells = qc.Cells(centers=[[0.0, 0.0, 0.0], [0.0, 0.9, 0.0]], axes=[[1.0, 0.0, 0.0]] * 2, lengths=2.0, radii=0.5,
+                     masses=1.0, growth_inertia=np.inf)
+    with pytest.raises(InvalidArgumentError, match="only the solver ipm-petsc"):
+        qc.position_step(cells, 0.1, comm=FakeComm(2))
