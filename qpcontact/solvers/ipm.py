@@ -40,7 +40,10 @@ Impulses are measured relative to the largest: in a jammed colony they reach hun
 the scale of one collision, and only their relative precision is meaningful.
 
 Registered as ``"ipm"``: complementarity in contact form, bounds on ``ỹ``, time limit honoured
-(checked between iterations), solved per independent block.
+(checked between iterations), solved per independent block. The iterations
+(:func:`iterate_rows`) see the rows and the normal matrix only through ``@``, ``factor`` and
+:class:`Reductions`, so the distributed solver ``"ipm-petsc"`` (:mod:`qpcontact.solvers.petsc`)
+runs this same code on each process's part of the problem.
 """
 
 from __future__ import annotations

@@ -41,11 +41,6 @@ from . import cholesky
 from .ipm import MAX_ITERATIONS, UNKNOWNS_ACCURACY, Reductions, iterate_rows, make_rows
 from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
 
-#: MUMPS's options for the Newton systems (PETSc's option names): the working space of the
-#: numeric phase 50 % above the analysis's estimate (its default 20 % failed a factorization of
-#: a grown colony with the error -9, "too little workspace", then analysed again).
-MUMPS_OPTIONS = {"mat_mumps_icntl_14": "50"}
-
 
 def installed() -> bool:
     """petsc4py and mpi4py can be imported."""
@@ -171,9 +166,6 @@ class DistributedGram:
         pc = self._ksp.getPC()
         pc.setType(PETSc.PC.Type.CHOLESKY)
         pc.setFactorSolverType(PETSc.Mat.SolverType.MUMPS)
-        options = PETSc.Options()
-        for key, value in MUMPS_OPTIONS.items():
-            options.setValue(key, value)
         self._x, self._b = self._diagonal.duplicate(), self._diagonal.duplicate()
 
     def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
@@ -191,12 +183,9 @@ class DistributedGram:
         self._normal = self._scaled.transposeMatMult(self._scaled, result=self._normal)
         self._diagonal.array[:] = d
         self._normal.setDiagonal(self._diagonal, addv=PETSc.InsertMode.ADD_VALUES)
-        if first:
+        if first:  # MUMPS's Cholesky without pivoting (its symmetric positive definite mode)
             self._normal.setOption(PETSc.Mat.Option.SPD, True)
-            self._ksp.setOperators(self._normal)
-            self._ksp.getPC().setFromOptions()
-        else:
-            self._ksp.setOperators(self._normal)
+        self._ksp.setOperators(self._normal)
         self._ksp.setUp()
         status = self._ksp.getPC().getFactorMatrix().getMumpsInfog(1)  # the same on every process
         if status < 0:  # -10: numerically singular; others: MUMPS's error codes
