@@ -45,7 +45,7 @@ import json, resource, sys, time
 import numpy as np
 from qpcontact.io import load_colony
 from qpcontact.simulation import Settings
-from qpcontact.simulation.simulate import step_function
+from qpcontact.simulation.simulate import sink_drive, step_function
 
 state, steps, solver, ends = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
 comm = None
@@ -58,20 +58,13 @@ settings = Settings().updated({"dimensions": 3 if three_d else 2, "position.solv
 extra = {}
 take_step = step_function(settings, extra)
 
-def drive_of(colony):
-    if not (three_d and settings.model.sink_speed):
-        return None
-    drive = np.zeros((colony.cells.n, 7))
-    drive[:, 2] = -settings.model.sink_speed * colony.cells.masses
-    return drive
-
-colony = take_step(colony, settings.time_step_of(colony), drive=drive_of(colony)).colony
+colony = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony)).colony
 rows = []
 for _ in range(steps):
     if comm is not None:
         comm.Barrier()
     t = time.perf_counter()
-    outcome = take_step(colony, settings.time_step_of(colony), drive=drive_of(colony))
+    outcome = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony))
     total = time.perf_counter() - t
     result = outcome.result
     rows.append(dict(cells=colony.cells.n, total=total, solve=result.times["solve"],

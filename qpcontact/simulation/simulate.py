@@ -516,6 +516,14 @@ def save_state(state: RunState, settings: Settings, folder: RunFolder | None) ->
         state.saved = state.step
 
 
+def sink_drive(settings: Settings, colony: Colony) -> np.ndarray | None:
+    """The drive of the model's sinking in 3D (every free cell pushed down at ``sink_speed``
+    towards the substrate), or None (2D, or no sinking): what every step of a run adds."""
+    if settings.run.dimensions == 2 or not settings.model.sink_speed:
+        return None
+    return push(colony, [0.0, 0.0, -settings.model.sink_speed])
+
+
 def prepare_step(state: RunState, settings: Settings, hook: Hook | None,
                  pressure_growth: PressureGrowth | None) -> tuple[Colony, Colony, float, np.ndarray | None]:
     """What the next step starts from: the model hook's control, the division, the rates slowed
@@ -539,7 +547,7 @@ def prepare_step(state: RunState, settings: Settings, hook: Hook | None,
             felt = felt.carried_over(current, divided)
         stepping = divided.replace(rates=pressure_growth.rates(divided, felt))
     dt = settings.time_step_of(stepping)
-    drive = push(divided, [0.0, 0.0, -model.sink_speed]) if not planar and model.sink_speed else None
+    drive = sink_drive(settings, divided)
     if control.drive is not None:
         shared = daughters_share(control.drive, current, divided)
         drive = shared if drive is None else drive + shared

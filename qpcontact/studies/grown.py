@@ -46,7 +46,7 @@ from ..colony import Colony
 from ..io import load_colony, save_colony
 from ..outputs import atomic_write, describe_written, prepare_folder, write_text
 from ..simulation import Settings, run_colony
-from ..simulation.simulate import step_function
+from ..simulation.simulate import sink_drive, step_function
 from ..timestep import PositionStepResult
 from .bench import machine_description
 from .harness import guarded
@@ -150,10 +150,7 @@ def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[
         extra: dict[str, np.ndarray] = {}
         take_step = step_function(settings, extra)
         dt = settings.time_step_of(colony)
-        drive = None
-        if dimensions == 3 and settings.model.sink_speed:
-            drive = np.zeros((colony.cells.n, 7))
-            drive[:, 2] = -settings.model.sink_speed * colony.cells.masses
+        drive = sink_drive(settings, colony)
         t0 = time.perf_counter()
         outcome = take_step(colony, dt, drive=drive)
         seconds.append(time.perf_counter() - t0)
