@@ -57,7 +57,7 @@ from ..geometry.surfaces import Plane, substrate
 from ..io.runs import read_toml
 from ..solvers import FORMS, QP_FORMULATIONS, get_solver
 from ..timestep.mechanics import GROWTH_LAWS
-from ..timestep.position import PositionSettings
+from ..timestep.position import PositionSettings, search_margin
 
 __all__ = ["COLORS", "FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSettings", "Settings", "VelocitySettings",
            "add_setting_flags", "check_continuation", "file_layer", "flag_layer", "merge", "refuse_unused",
@@ -319,10 +319,13 @@ class Settings:
 
     def describe_step(self) -> str:
         """The step that runs, its solver and tolerance, in words (pictures, summaries):
-        ``"position step, ipm at tolerance 0.001, overlap ≤ 0.01"``."""
+        ``"position step, ipm at tolerance 0.001, overlap ≤ 0.01"``, and the search margin when
+        the scene picked it (``margin = none``: ``", search margin 0.75 (by the scene)"``)."""
         if self.run.step == "position":
             p = self.position
-            return f"position step, {p.solver} at tolerance {p.tolerance:g}, overlap ≤ {p.overlap_tolerance:g}"
+            chosen = "" if p.margin is not None else \
+                f", search margin {search_margin(p, self.run.dimensions == 2):g} (by the scene)"
+            return f"position step, {p.solver} at tolerance {p.tolerance:g}, overlap ≤ {p.overlap_tolerance:g}{chosen}"
         v = self.velocity
         return f"velocity step, {v.solver}/{v.formulation} at tolerance {v.tolerance:g}"
 

@@ -494,8 +494,9 @@ class _Progress:
     turn_limited: int = 0
 
 
-def _margin(settings: PositionSettings, planar: bool) -> float:
-    """The reach of the contact search [diameters]: the setting, or its default for the scene."""
+def search_margin(settings: PositionSettings, planar: bool) -> float:
+    """The reach of the contact search [diameters]: the setting, or its default for the scene
+    (``margin = None``: 0.75 in a monolayer, 0.5 in 3D)."""
     if settings.margin is not None:
         return settings.margin
     return 0.75 if planar else 0.5
@@ -714,7 +715,7 @@ def position_step(
     form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
     times = {"detect": 0.0, "assemble": 0.0, "solve": 0.0}
     t_start = t0 = time.perf_counter()
-    reach = _margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if n else 0.0
+    reach = search_margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if n else 0.0
     free = move(cells, dt, drive)
     predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
     first_pairs = _first_pairs(cells, free, predicted, reach)

@@ -301,7 +301,8 @@ def test_the_color_flag_colours_colony_png_by_pressure_and_the_default_by_orient
     assert "2D pressure [F/µm]" in label and "position step, ipm" in title
     assert read_toml(tmp_path / "pressure" / "config.toml")["output"]["color"] == "pressure"
     title, _, _ = drawn["slowed"]
-    assert title.endswith("overlap ≤ 0.01\npressure growth exponential, stall pressure 3 F/µm)")  # names what ran
+    assert title.endswith("overlap ≤ 0.01, search margin 0.75 (by the scene)\npressure growth exponential, "
+                          "stall pressure 3 F/µm)")  # names what ran
     for name in drawn:
         assert (tmp_path / name / "colony.png").stat().st_size > 1000
 
@@ -333,3 +334,9 @@ def test_a_config_file_with_the_pressure_settings(tmp_path, capsys):
     config.write_text('[model]\npressure_growth = "fast"\n')
     assert cli.main(["simulate", "--config", str(config), "--out", str(tmp_path / "f"), "--quiet"]) == 2
     assert "[model] pressure_growth: expected one of off, linear, exponential, got 'fast'" in capsys.readouterr().err
+
+
+def test_the_step_in_words_names_the_search_margin_the_scene_picked():
+    assert Settings().describe_step().endswith(", search margin 0.75 (by the scene)")
+    assert Settings().updated({"dimensions": 3}).describe_step().endswith(", search margin 0.5 (by the scene)")
+    assert "search margin" not in Settings().updated({"position_margin": 0.4}).describe_step()  # given: in config
