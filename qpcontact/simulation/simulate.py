@@ -213,7 +213,7 @@ def turning_reach(cells: Cells, dt: float) -> float:
     return float(speed.max(initial=0.0)) * dt
 
 
-def step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunction:
+def step_function(settings: Settings, extra: dict[str, np.ndarray], comm: Any = None) -> StepFunction:
     """The function :func:`run_colony` advances the colony with, once per step:
     ``take_step(colony, dt, drive=drive) -> StepOutcome`` (the colony after the step, whose
     cells divided before it; the step's result; the step taken; the rejected attempts).
@@ -223,10 +223,11 @@ def step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunct
     step exactly across an interruption (e.g. a solver's warm start). Replace its arrays, do not
     change them in place: an interrupted step's changes are undone by restoring the mapping.
     The velocity-level step with retries (:func:`grow_with_retries`) keeps none; the position
-    step (:func:`position_step_function`) keeps its contact impulses (``warm.*``).
+    step (:func:`position_step_function`) keeps its contact impulses (``warm.*``). ``comm``: the
+    MPI processes the position step is shared among (:func:`~qpcontact.timestep.position_step`).
     """
     if settings.run.step == "position":
-        return position_step_function(settings, extra)
+        return position_step_function(settings, extra, comm)
     return partial(grow_with_retries, settings=settings, **settings.step_options())
 
 
@@ -236,7 +237,7 @@ WARM_ARRAYS = ("a", "b", "kind", "impulse")
 MOTION_ARRAYS = ("ids", "velocity", "turning")
 
 
-def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> StepFunction:
+def position_step_function(settings: Settings, extra: dict[str, np.ndarray], comm: Any = None) -> StepFunction:
     """The position-level step of a run (:func:`qpcontact.colony.grow_position`): the substrate
     in 3D, the planar unknowns in 2D, the contact impulses and the cells' motion of each step kept
     in ``extra`` as the next one's warm start and predictor (and so restored on resume). A step that
@@ -259,7 +260,7 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> 
         for attempt in range(halvings + 1):
             try:
                 grown, out = grow_position(colony, dt, drive=drive, planes=planes, planar=True if planar else None,
-                                           settings=position, warm=warm, motion=motion)
+                                           settings=position, warm=warm, motion=motion, comm=comm)
             except StepFailedError:
                 if attempt == halvings:
                     raise
@@ -270,7 +271,7 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray]) -> 
                 try:
                     grown, out = grow_position(colony, dt, drive=drive, planes=planes,
                                                planar=True if planar else None, settings=clearing, warm=warm,
-                                               motion=motion)
+                                               motion=motion, comm=comm)
                 except StepFailedError:
                     pass  # the first answer stands: converged, only above the bound
             extra.update({f"warm.{name}": getattr(out.warm, name) for name in WARM_ARRAYS})
@@ -441,7 +442,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     if hook is None and settings.model.hook:
         hook = load_hook(settings.model.hook)
     check_target(settings, state.colony, hook)
-    take_step = step_function(settings, state.extra)  # the run's one step function (swap it here)
+    take_step = step_function(settings, state.extra, comm)  # the run's one step function (swap it here)
     if pressure_growth is None:
         pressure_growth = pressure_growth_of(settings)
     bar = tqdm(total=settings.run.cells, initial=state.colony.cells.n, unit="cell", disable=not progress,

@@ -61,7 +61,6 @@ from ..geometry.cells import Cells
 from ..geometry.contacts import (
     KIND_BITS,
     Contacts,
-    candidate_pairs,
     concatenate,
     contact_keys,
     evaluate_contacts,
@@ -69,6 +68,7 @@ from ..geometry.contacts import (
     select_contacts,
 )
 from ..geometry.motion import left_jacobian, move, rotate, turning_vectors
+from ..geometry.regions import ONE, Split
 from ..geometry.surfaces import Plane, evaluate_plane_contacts, plane_contacts
 from ..resolve.resolve import acceptance_failure
 from ..solvers import Problem, SolverSpec, get_solver, solve
@@ -331,20 +331,21 @@ class _Tracked:
                            np.concatenate([self.kind, other.kind]), span)
 
 
-def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int, pairs: np.ndarray | None = None) -> _Tracked:
+def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int, pairs: np.ndarray | None = None,
+            split: Split = ONE) -> _Tracked:
     """Every contact within ``reach`` [length] of the cells as they are (the closest points of
     every pair, whatever its ends: across the linearizations the closest point moves along the
     pair, and only kind 0 follows it; docs/model-notes.md), among the candidate ``pairs`` when
-    given (a superset of the pairs within reach, :func:`_first_pairs`)."""
+    given (a superset of the pairs within reach, :func:`_first_pairs`); the search and the narrow
+    phase shared among the processes of ``split``."""
     if pairs is None:
-        pairs = candidate_pairs(cells, reach)
+        pairs = split.candidate_pairs(cells, reach)
     else:  # a superset for several configurations: the pairs whose enclosing spheres are within reach here
         i, j = pairs[:, 0], pairs[:, 1]
         apart = cells.centers[i] - cells.centers[j]
         within = 0.5 * (cells.lengths[i] + cells.lengths[j]) + cells.radii[i] + cells.radii[j] + reach
         pairs = pairs[np.einsum("ij,ij->i", apart, apart) <= within * within]
-    a, b, kind = select_contacts(cells, pairs, reach, always_closest=True)
-    parts = [(a, b, kind)]
+    parts = split.gather(select_contacts(cells, pairs[split.share(len(pairs))], reach, always_closest=True))
     for index, plane in enumerate(planes):
         found = plane_contacts(cells, [plane], reach)
         parts.append((found.cell_a, np.full(len(found), -1 - index), found.kind))
@@ -352,13 +353,15 @@ def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int, pair
     return _Tracked.of(a, b, kind, span)
 
 
-def _evaluate(cells: Cells, found: _Tracked, planes: Sequence[Plane], planar: bool) -> Contacts:
+def _evaluate(cells: Cells, found: _Tracked, planes: Sequence[Plane], planar: bool, split: Split = ONE) -> Contacts:
     """The contacts of ``found`` at the cells' present positions, in the order of ``found``
-    (their geometry: the normal velocities are left 0, :func:`_result` gives the last ones theirs)."""
-    pairwise = found.b >= 0
-    parts = [evaluate_contacts(cells, found.a[pairwise], found.b[pairwise], found.kind[pairwise], planar=planar,
-                               velocities=False)]
-    order = [np.flatnonzero(pairwise)]
+    (their geometry: the normal velocities are left 0, :func:`_result` gives the last ones theirs),
+    the pairs shared among the processes of ``split`` (each evaluates a contiguous part)."""
+    pairwise = np.flatnonzero(found.b >= 0)
+    mine = pairwise[split.share(pairwise.size)]
+    parts = split.gather(evaluate_contacts(cells, found.a[mine], found.b[mine], found.kind[mine], planar=planar,
+                                           velocities=False))
+    order = [pairwise]
     for j, plane in enumerate(planes):
         on = np.flatnonzero(found.b == -1 - j)
         parts.append(evaluate_plane_contacts(cells, plane, found.a[on], found.kind[on]))
@@ -390,11 +393,11 @@ class _Floors:
 
 
 def _start(cells: Cells, planes: Sequence[Plane], planar: bool, span: int,
-           settings: PositionSettings, pairs: np.ndarray) -> tuple[_Floors, float]:
+           settings: PositionSettings, pairs: np.ndarray, split: Split = ONE) -> tuple[_Floors, float]:
     """The floors of the targets and the largest overlap at the start of the step (among the
     candidate ``pairs``, a superset of the touching ones)."""
-    found = _detect(cells, planes, 0.0, span, pairs)
-    start = _evaluate(cells, found, planes, planar)
+    found = _detect(cells, planes, 0.0, span, pairs, split)
+    start = _evaluate(cells, found, planes, planar, split)
     diameter = _diameters(cells, start)
     overlapping = start.separation < 0
     pairs = found.keys[overlapping] >> KIND_BITS
@@ -570,7 +573,7 @@ def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known:
 
 
 def _track(found: _Tracked, now: Cells, predicted: Cells | None, planes: Sequence[Plane], reach: float,
-           span: int, pairs: np.ndarray | None = None) -> _Tracked:
+           span: int, pairs: np.ndarray | None = None, split: Split = ONE) -> _Tracked:
     """The contacts kept so far and those within ``reach`` of the cells where they are now (and,
     at the first linearization, where the last step's motion would take them, ``predicted``),
     among the candidate ``pairs`` when given (the first linearization's, :func:`_first_pairs`).
@@ -579,8 +582,8 @@ def _track(found: _Tracked, now: Cells, predicted: Cells | None, planes: Sequenc
     against a neighbour within one linearization (measured on a grown colony of 10⁴ cells, with
     half the margin after the first: 0.14 of a diameter of overlap at the seventh linearization,
     with a pair found only then)."""
-    found = found.union(_detect(now, planes, reach, span, pairs), span)
-    return found if predicted is None else found.union(_detect(predicted, planes, reach, span, pairs), span)
+    found = found.union(_detect(now, planes, reach, span, pairs, split), span)
+    return found if predicted is None else found.union(_detect(predicted, planes, reach, span, pairs, split), span)
 
 
 def _tip_displacement(start: Cells, end: Cells) -> np.ndarray:
@@ -593,7 +596,7 @@ def _tip_displacement(start: Cells, end: Cells) -> np.ndarray:
     return np.sqrt(np.maximum(np.einsum("ij,ij->i", plus, plus), np.einsum("ij,ij->i", minus, minus)))
 
 
-def _first_pairs(cells: Cells, now: Cells, predicted: Cells | None, reach: float) -> np.ndarray:
+def _first_pairs(cells: Cells, now: Cells, predicted: Cells | None, reach: float, split: Split = ONE) -> np.ndarray:
     """One broad phase for the start of the step and its first linearization: the candidate
     pairs of the cells at the start, each cell's reach widened by how far its axis moves to the
     first linearization's positions ``now`` (the free motion) and to ``predicted``. The start's
@@ -602,7 +605,7 @@ def _first_pairs(cells: Cells, now: Cells, predicted: Cells | None, reach: float
     slack = _tip_displacement(cells, now)
     if predicted is not None:
         slack = np.maximum(slack, _tip_displacement(cells, predicted))
-    return candidate_pairs(cells, reach, slack)
+    return split.candidate_pairs(cells, reach, slack)
 
 
 def _solve(progress: _Progress, system: ContactSystem, problem: Problem, spec: SolverSpec, form: str,
@@ -718,8 +721,9 @@ def position_step(
     reach = search_margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if n else 0.0
     free = move(cells, dt, drive)
     predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
-    first_pairs = _first_pairs(cells, free, predicted, reach)
-    floors, start_overlap = _start(cells, planes, planar, span, settings, first_pairs)
+    split = Split(comm)
+    first_pairs = _first_pairs(cells, free, predicted, reach, split)
+    floors, start_overlap = _start(cells, planes, planar, span, settings, first_pairs, split)
     times["detect"] += time.perf_counter() - t0
     empty = np.zeros(0, dtype=np.intp)
     progress = _Progress(impulses=np.zeros((n, 7)), found=_Tracked(empty, empty, empty, empty.astype(np.int64)),
@@ -729,9 +733,9 @@ def position_step(
         now = move(cells, dt, drive + progress.impulses)
         t0 = time.perf_counter()
         known = progress.found.keys
-        progress.found = (_track(progress.found, now, predicted, planes, reach, span, first_pairs) if iteration == 0
-                          else _track(progress.found, now, None, planes, reach, span))
-        contacts = _evaluate(now, progress.found, planes, planar)
+        progress.found = (_track(progress.found, now, predicted, planes, reach, span, first_pairs, split)
+                          if iteration == 0 else _track(progress.found, now, None, planes, reach, span, None, split))
+        contacts = _evaluate(now, progress.found, planes, planar, split)
         diameter = _diameters(now, contacts)
         times["detect"] += time.perf_counter() - t0
         if _judge(progress, contacts, diameter, known, iteration, settings):
