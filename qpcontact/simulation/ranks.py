@@ -1,10 +1,11 @@
 """A run over MPI processes (docs/distributed.md): ``mpiexec -n P qpcontact simulate ...``.
 
 Every process holds the whole colony (its state is small: about 200 bytes a cell) and takes the
-same steps with the same random numbers; the position step's solve, the part of a step that
-grows fastest with the colony, is split among them by the distributed interior point
-(``ipm-petsc``, :mod:`qpcontact.solvers.petsc`), whose answer every process receives whole, so
-the processes stay identical bit for bit. Process 0 alone writes the run's folder (snapshots,
+same steps with the same random numbers; contact detection is shared by region
+(:mod:`qpcontact.geometry.regions`) and the position step's solve, the part of a step that grows
+fastest with the colony, is split among them by the distributed interior point (``ipm-petsc``,
+:mod:`qpcontact.solvers.petsc`); every process receives the whole of each, so the processes stay
+identical bit for bit. Process 0 alone writes the run's folder (snapshots,
 history, ParaView files, pictures) and prints; a resumed run reads the same snapshot in every
 process. A signal (Ctrl-C, SIGTERM) stops the run at the end of the step on every process at
 once (:class:`CollectiveInterrupt`), never in the middle of a collective solve.
