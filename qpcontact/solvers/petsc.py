@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import InvalidArgumentError
+from ..errors import InvalidArgumentError, SolverFailedError
 from . import cholesky
 from .ipm import MAX_ITERATIONS, UNKNOWNS_ACCURACY, Reductions, iterate_rows, make_rows
 from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
@@ -173,7 +173,8 @@ class DistributedGram:
         the solve on this process's part.
 
         Raises:
-            ArithmeticError: MUMPS found the matrix not numerically positive definite.
+            ArithmeticError: MUMPS found the matrix numerically singular.
+            SolverFailedError: MUMPS failed otherwise (its error code and what may help).
         """
         PETSc = petsc()
         self._B.copy(self._scaled, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
@@ -188,8 +189,13 @@ class DistributedGram:
         self._ksp.setOperators(self._normal)
         self._ksp.setUp()
         status = self._ksp.getPC().getFactorMatrix().getMumpsInfog(1)  # the same on every process
-        if status < 0:  # -10: numerically singular; others: MUMPS's error codes
-            raise ArithmeticError(f"MUMPS: the factorization failed with INFOG(1) = {status}")
+        if status == -10:  # numerically singular: the interior point regularizes more
+            raise ArithmeticError("MUMPS: the matrix is numerically singular (INFOG(1) = -10)")
+        if status < 0:
+            hint = " (workspace too small: PETSC_OPTIONS='-mat_mumps_icntl_14 100')" if status in (-8, -9) else ""
+            if status == -38:
+                hint = " (a parallel analysis, ICNTL(28) = 2, that this MUMPS was built without ParMETIS/PT-SCOTCH for)"
+            raise SolverFailedError(f"MUMPS failed with INFOG(1) = {status}{hint}; its user guide lists the codes")
 
         def solve(v: np.ndarray) -> np.ndarray:
             self._b.array[:] = v
