@@ -91,3 +91,18 @@ def test_the_plain_solve_timing_runs_on_a_snapshot(tmp_path):
                           capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     assert "| cholesky |" in done.stdout and "| lsmr |" in done.stdout and "compare_with_linear" in done.stdout
+
+
+def test_the_step_profile_writes_its_phase_table(tmp_path):
+    """benchmarks/profile_step.py on a small grown colony: one line with the phases of a step."""
+    from qpcontact.io.runs import RunFolder, latest_snapshot
+    from qpcontact.simulation import Settings, run_colony
+
+    folder = RunFolder.create(tmp_path / "run")
+    run_colony(Settings().updated({"cells": 150}), progress=False, folder=folder)
+    out = tmp_path / "profile.md"
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "profile_step.py"), str(latest_snapshot(tmp_path / "run")),
+                           "--steps", "1", "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| step_")]
+    assert len(rows) == 1 and "%" in rows[0]

@@ -170,3 +170,22 @@ def test_ctrl_c_of_mpiexec_saves_the_state_reached_on_every_process(tmp_path):
     done = simulate("--resume", "--max-steps", str(rows + 2), "--out", str(folder), processes=2)
     assert done.returncode == 3
     assert len((folder / "history.csv").read_text().splitlines()) - 1 == rows + 2
+
+
+def test_the_scaling_benchmark_measures_and_compares(grown, tmp_path):
+    """benchmarks/mpi_scaling.py on small states: the agreement of 2 processes with one, and the
+    table written where it is told."""
+    states = tmp_path / "states"
+    states.mkdir()
+    shutil.copy(grown[2], states / "2d-3000.npz")
+    shutil.copy(grown[3], states / "3d-1000.npz")
+    out = tmp_path / "scaling.md"
+    done = subprocess.run([sys.executable, str(HERE.parents[1] / "benchmarks" / "mpi_scaling.py"), "--states",
+                           str(states), "--steps", "1", "--out", str(out)], capture_output=True, text=True,
+                          env=environment(), timeout=600, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = [line for line in out.read_text().splitlines() if line.startswith(("| 2d-3000", "| 3d-1000"))]
+    assert len(rows) == 2
+    for row in rows:
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        assert cells[2] == "yes" and float(cells[3]) <= CONTRACT
