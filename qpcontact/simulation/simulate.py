@@ -58,6 +58,10 @@ the history and the pictures are saved, and ``--resume`` continues it (exit stat
 signal's number: 130 for SIGINT, 143 for SIGTERM). A run that stops at ``--max-steps`` short of
 ``--cells`` says so and exits with status 3 (:data:`EXIT_SHORT`); a target it can never reach
 (rate 0 without a hook) is refused before it starts (:func:`check_target`).
+
+Under ``mpiexec -n P`` (the distributed stack: ``scripts/install-mpi``), one colony grows over P
+processes: contact detection is shared by region and the contact solve is split among them
+(solver ``ipm-petsc``), process 0 writes; :mod:`qpcontact.simulation.ranks`, docs/distributed.md.
 """
 
 from __future__ import annotations
