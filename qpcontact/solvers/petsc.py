@@ -238,26 +238,17 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
                                    "the one-process ipm reaches (in the contact impulses)")
     start = time.perf_counter()
     comm = world() if comm is None else comm
-    PETSc = petsc()
     B = sp.csr_matrix(matrix)
-    B.sort_indices()
+    if not B.has_sorted_indices:
+        B = B.sorted_indices()  # a copy: the caller's matrix stays as it was
     k, n = B.shape
     lo = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
     hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
     if lo.shape != (n,) or hi.shape != (n,):
         raise InvalidArgumentError(f"bounds: expected shape ({n},), got lower {lo.shape}, upper {hi.shape}")
     partition = Partition(B, comm)
-    rank = comm.Get_rank()
-    mine, my_rows = partition.columns(rank), partition.rows(rank)
-    place = np.empty(n, dtype=np.int64)
-    place[partition.column_order] = np.arange(n)
-    local = B[my_rows]
-    local = sp.csr_matrix((local.data, place[local.indices], local.indptr), shape=local.shape)
-    local.sort_indices()
-    mat = PETSc.Mat().createAIJ(size=((my_rows.size, k), (mine.size, n)),
-                                csr=(local.indptr.astype(PETSc.IntType), local.indices.astype(PETSc.IntType),
-                                     local.data), comm=_petsc_comm(comm))
-    mat.assemble()
+    mine, my_rows = partition.columns(comm.Get_rank()), partition.rows(comm.Get_rank())
+    mat = _distributed_matrix(B, partition, my_rows, comm)
     reduce = _Reductions(comm)
     normal = DistributedGram(mat)
     try:
@@ -278,6 +269,24 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
     lam = _gather(part.lam, partition.row_order, partition.row_counts, comm)
     return IterativeSolution(y, lam, part.iterations, part.converged, part.status, part.residual,
                              time.perf_counter() - start)
+
+
+def _distributed_matrix(B: sp.csr_matrix, partition: Partition, rows: np.ndarray, comm: Any) -> Any:
+    """``B̃`` as PETSc's MPIAIJ matrix: this process's ``rows``, the columns renumbered in the
+    order of the processes' blocks (collective)."""
+    PETSc = petsc()
+    k, n = B.shape
+    place = np.empty(n, dtype=np.int64)
+    place[partition.column_order] = np.arange(n)
+    local = B[rows]
+    local = sp.csr_matrix((local.data, place[local.indices], local.indptr), shape=local.shape)
+    local.sort_indices()
+    owned = int(partition.column_counts[comm.Get_rank()])
+    mat = PETSc.Mat().createAIJ(size=((rows.size, k), (owned, n)),
+                                csr=(local.indptr.astype(PETSc.IntType), local.indices.astype(PETSc.IntType),
+                                     local.data), comm=_petsc_comm(comm))
+    mat.assemble()
+    return mat
 
 
 def _petsc_comm(comm: Any) -> Any:
