@@ -20,6 +20,7 @@ from typing import Any
 
 from ..errors import InvalidArgumentError
 from ..io.runs import Interrupt
+from ..solvers.ipm import UNKNOWNS_ACCURACY
 from .settings import Settings
 
 #: What MPI launchers put in each process's environment: the number of processes (Open MPI's
@@ -63,14 +64,18 @@ def distributed_settings(settings: Settings, comm: Any) -> tuple[Settings, str]:
     step's solver ``ipm`` becomes its distributed form ``ipm-petsc`` (the same method).
 
     Raises:
-        InvalidArgumentError: a velocity-level run, or another solver (each process would solve
-            the whole problem).
+        InvalidArgumentError: a velocity-level run, another solver (each process would solve
+            the whole problem), or a solver tolerance below what ``ipm-petsc`` reaches.
     """
     size = comm.Get_size()
     if settings.run.step != "position":
         raise InvalidArgumentError(f"a run on {size} MPI processes takes the position step (--step position); got "
                                    f"--step {settings.run.step}")
     solver = settings.position.solver
+    if settings.position.tolerance < UNKNOWNS_ACCURACY:
+        raise InvalidArgumentError(f"a run on {size} MPI processes solves to --position-tolerance {UNKNOWNS_ACCURACY:g} "
+                                   f"or looser ({DISTRIBUTED_SOLVER} works in the unknowns only); got "
+                                   f"{settings.position.tolerance:g}")
     if solver == DISTRIBUTED_SOLVER:
         return settings, ""
     if solver != "ipm":

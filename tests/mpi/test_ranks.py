@@ -63,7 +63,8 @@ def test_a_launch_without_the_stack_is_a_named_error(monkeypatch):
 
 
 @pytest.mark.parametrize(("values", "match"), [({"position.solver": "clarabel"}, "every process"),
-                                               ({"step": "velocity"}, "--step position")])
+                                               ({"step": "velocity"}, "--step position"),
+                                               ({"position.tolerance": 1e-6}, "0.0001 or looser")])
 def test_what_a_distributed_run_cannot_do_is_refused(values, match):
     with pytest.raises(InvalidArgumentError, match=match):
         ranks.distributed_settings(Settings().updated(values), FakeComm(2))
