@@ -126,11 +126,7 @@ class _Rows:
     upper: np.ndarray  # (U,) columns with an upper bound
     c: np.ndarray  # (K + L + U,) right-hand sides
     reduce: Reductions = SERIAL  # over the parts of a distributed solve
-
-    @property
-    def m(self) -> int:
-        """The number of rows, over every part."""
-        return int(self.reduce.total(float(self.c.size)))
+    m: int = 0  # the number of rows over every part (make_rows counts them once)
 
     @property
     def k(self) -> int:
@@ -365,10 +361,7 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
     B = sp.csr_matrix(matrix)
     b = np.asarray(rhs, dtype=float)
     k, n = B.shape
-    lo = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-    hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
-    if lo.shape != (n,) or hi.shape != (n,):
-        raise InvalidArgumentError(f"bounds: expected shape ({n},), got lower {lo.shape}, upper {hi.shape}")
+    lo, hi = bounds_of(lower, upper, n)
     rows = make_rows(B, B.T.tocsr(), b, lo, hi, SERIAL)
     if rows is None:
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
@@ -378,6 +371,19 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
                         time_limit=time_limit, initial=initial, warm_shift=warm_shift, space=space)
 
 
+def bounds_of(lower: np.ndarray | None, upper: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The (n,) bounds ``l, u`` (``∓inf`` for None).
+
+    Raises:
+        InvalidArgumentError: a bound of another shape.
+    """
+    lo = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+    hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
+    if lo.shape != (n,) or hi.shape != (n,):
+        raise InvalidArgumentError(f"bounds: expected shape ({n},), got lower {lo.shape}, upper {hi.shape}")
+    return lo, hi
+
+
 def make_rows(B: Any, Bt: Any, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, reduce: Reductions) -> _Rows | None:
     """The rows of the problem (:class:`_Rows`) from ``B̃`` and ``B̃ᵀ`` (anything with ``@``: a
     distributed solve passes its part of each), ``b̃`` and the bounds; None when a bound
@@ -385,8 +391,8 @@ def make_rows(B: Any, Bt: Any, b: np.ndarray, lo: np.ndarray, hi: np.ndarray, re
     if reduce.most(float(np.any(lo > hi))):
         return None
     lower_columns, upper_columns = np.flatnonzero(np.isfinite(lo)), np.flatnonzero(np.isfinite(hi))
-    return _Rows(B, Bt, lower_columns, upper_columns, np.concatenate([b, lo[lower_columns], -hi[upper_columns]]),
-                 reduce)
+    c = np.concatenate([b, lo[lower_columns], -hi[upper_columns]])
+    return _Rows(B, Bt, lower_columns, upper_columns, c, reduce, int(reduce.total(float(c.size))))
 
 
 def iterate_rows(rows: _Rows, normal: Any, lo: np.ndarray, hi: np.ndarray, *, start: float, tolerance: float,

@@ -38,7 +38,7 @@ import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError, SolverFailedError
 from . import cholesky
-from .ipm import MAX_ITERATIONS, UNKNOWNS_ACCURACY, Reductions, iterate_rows, make_rows
+from .ipm import MAX_ITERATIONS, UNKNOWNS_ACCURACY, Reductions, bounds_of, iterate_rows, make_rows
 from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
 
 
@@ -242,10 +242,7 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
     if not B.has_sorted_indices:
         B = B.sorted_indices()  # a copy: the caller's matrix stays as it was
     k, n = B.shape
-    lo = np.full(n, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-    hi = np.full(n, np.inf) if upper is None else np.asarray(upper, dtype=float)
-    if lo.shape != (n,) or hi.shape != (n,):
-        raise InvalidArgumentError(f"bounds: expected shape ({n},), got lower {lo.shape}, upper {hi.shape}")
+    lo, hi = bounds_of(lower, upper, n)
     partition = Partition(B, comm)
     mine, my_rows = partition.columns(comm.Get_rank()), partition.rows(comm.Get_rank())
     mat = _distributed_matrix(B, partition, my_rows, comm)
