@@ -767,7 +767,8 @@ def run_command(args: argparse.Namespace) -> int:
     print(f"{result.colony.cells.n} cells at step {result.steps}, t = {result.colony.time:.3f} doubling times "
           f"(= {result.colony.time / cycle:.1f} cycles of a free cell, {cycle:.2f} each); this run: "
           f"{result.steps - result.first_step} steps in {result.wall_seconds:.1f} s; largest overlap "
-          f"{max(history['max_overlap'], default=0.0):.4f} of a diameter; {settings.describe_step()}: contact solve "
+          f"{max(history['max_overlap'], default=0.0):.4f} of a diameter; {settings.describe_step()}"
+          f"{'' if comm is None else f' on {comm.Get_size()} MPI processes'}: contact solve "
           f"{np.sum(result.history['solve_seconds']):.1f} s; {settings.describe_growth()}")
     print(describe_written(folder.written))
     status = exit_status(result, settings)

@@ -304,5 +304,6 @@ register(SolverSpec(
     solve=_solve, available=installed,
     description="the built-in interior point over MPI processes (PETSc, MUMPS); takes bounds on ỹ",
     settings=("max_iterations", "comm"), blockwise=False, bounds=("contact",),
-    install_hint="needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distributed.md)",
+    install_hint="needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distributed.md); a run saved by "
+                 "several processes continues in one with --position-solver ipm",
 ))

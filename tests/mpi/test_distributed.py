@@ -76,7 +76,7 @@ def test_two_processes_take_the_steps_of_one(grown, tmp_path, dimensions):
     tolerance."""
     one = steps_from(grown[dimensions], tmp_path / "one", 6, processes=1)
     two = steps_from(grown[dimensions], tmp_path / "two", 6, processes=2)
-    assert "running on 2 MPI processes" in two.stderr and "ipm-petsc" in two.stdout
+    assert "running on 2 MPI processes" in two.stderr and "ipm-petsc" in two.stdout and "on 2 MPI processes" in two.stdout
     a, _ = load_colony(latest_snapshot(tmp_path / "one"))
     b, _ = load_colony(latest_snapshot(tmp_path / "two"))
     assert a.cells.n == b.cells.n and np.array_equal(a.ids, b.ids) and np.array_equal(a.parent_ids, b.parent_ids)
@@ -115,6 +115,11 @@ def test_a_distributed_run_resumes_to_rounding_and_writes_one_snapshot(grown, tm
     assert float(np.max(np.abs(a.cells.axes - b.cells.axes))) <= ROUNDING
     assert sorted(p.name for p in (tmp_path / "parts" / "snapshots").iterdir())[-1] == latest_snapshot(
         tmp_path / "parts").name
+    # and one process continues what two wrote (the solver back to ipm, said)
+    done = simulate("--resume", "--max-steps", str(start + 8), "--cells", "100000", "--position-solver", "ipm",
+                    "--out", str(tmp_path / "parts"))
+    assert done.returncode == 3 and "position_solver: ipm-petsc -> ipm" in done.stderr
+    assert len((tmp_path / "parts" / "history.csv").read_text().splitlines()) - 1 == 8
 
 
 @pytest.mark.parametrize(("flags", "message"), [(("--position-solver", "clarabel"), "every process"),
