@@ -10,7 +10,8 @@ takes one step from the state untimed (its warm start and predictor), then times
 the run's own step function (``simulate``'s), each from the last:
 
 - *strong scaling*: the same state in one process with ``ipm`` (CHOLMOD, the default), on one MPI
-  process and on two with ``ipm-petsc`` (MUMPS);
+  process and on two with ``ipm-petsc`` (MUMPS), and (2D) on two with detection repeated in each
+  process instead of shared by region (the path before it was shared), each step by phase;
 - *weak scaling*: ``2d-10000`` on one process against ``2d-20000`` on two;
 - *memory*: each process's peak resident memory (``ru_maxrss``) at the end;
 - *agreement*: the end positions of ``--steps`` steps on two processes against one process's, in
@@ -47,7 +48,8 @@ from qpcontact.io import load_colony
 from qpcontact.simulation import Settings
 from qpcontact.simulation.simulate import sink_drive, step_function
 
-state, steps, solver, ends = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+state, steps, how, ends = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+solver = "ipm" if how == "ipm" else "ipm-petsc"
 comm = None
 if solver == "ipm-petsc":
     from qpcontact.solvers.petsc import world
@@ -56,7 +58,8 @@ colony, _ = load_colony(state)
 three_d = bool(np.any(colony.cells.centers[:, 2] != 0))
 settings = Settings().updated({"dimensions": 3 if three_d else 2, "position.solver": solver}, "mpi-scaling")
 extra = {}
-take_step = step_function(settings, extra)
+# "repeated": the solve split, detection in every process (as before it was shared by region)
+take_step = step_function(settings, extra, None if how == "repeated" else comm)
 
 colony = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony)).colony
 rows = []
@@ -67,7 +70,8 @@ for _ in range(steps):
     outcome = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony))
     total = time.perf_counter() - t
     result = outcome.result
-    rows.append(dict(cells=colony.cells.n, total=total, solve=result.times["solve"],
+    rows.append(dict(cells=colony.cells.n, total=total, solve=result.times["solve"], detect=result.times["detect"],
+                     assemble=result.times["assemble"],
                      linearizations=result.iterations, solver_iterations=result.solver_iterations,
                      max_overlap=result.max_overlap))
     colony = outcome.colony
@@ -92,7 +96,7 @@ def environment() -> dict[str, str]:
 def measure(state: Path, steps: int, solver: str, processes: int, ends: Path) -> dict:
     """One child: its timed steps and each process's peak memory."""
     command = [sys.executable, "-c", CHILD, str(state), str(steps), solver, str(ends)]
-    if solver == "ipm-petsc":
+    if solver != "ipm":
         command = ["mpiexec", "-n", str(processes), *command]
     done = subprocess.run(command, capture_output=True, text=True, check=False, env=environment())
     if done.returncode != 0:
@@ -145,7 +149,8 @@ def alike(cells: int, scratch: Path) -> list[str]:
 
 
 CONFIGURATIONS = (("one process, ipm", "ipm", 1), ("1 MPI process, ipm-petsc", "ipm-petsc", 1),
-                  ("2 MPI processes, ipm-petsc", "ipm-petsc", 2))
+                  ("2 MPI processes, ipm-petsc", "ipm-petsc", 2),
+                  ("2 MPI processes, ipm-petsc, detection in each", "repeated", 2))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -167,9 +172,9 @@ def main(argv: list[str] | None = None) -> None:
     lines = [f"# One colony over MPI processes\n\n{started}, qpcontact {version()}, {measured_on} at the start; median of {args.steps} "
              "steps per line, each from the last, after one untimed step; memory: each process's peak resident "
              "set.\n",
-             "| state | cells | run on | step [s] | contact solve [s] | speed-up (to one process) | "
-             "speed-up (to 1 MPI process) | IPM iterations | largest overlap | peak memory per process [MiB] |",
-             "|---|---:|---|---:|---:|---:|---:|---:|---:|---|"]
+             "| state | cells | run on | step [s] | detection [s] | assembly [s] | contact solve [s] | speed-up (to one "
+             "process) | speed-up (to 1 MPI process) | IPM iterations | largest overlap | peak memory per process [MiB] |",
+             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
     steps: dict[tuple[str, str], float] = {}
     for name in ("2d-20000", "3d-5000", "2d-10000"):
         state = args.states / f"{name}.npz"
@@ -186,7 +191,9 @@ def main(argv: list[str] | None = None) -> None:
             steps[(name, label)] = step
             first = steps.get((name, CONFIGURATIONS[0][0]), float("nan"))
             petsc_one = steps.get((name, CONFIGURATIONS[1][0]), float("nan"))
-            lines.append(f"| {name} | {rows[0]['cells']:,} | {label} | {step:.2f} | {solve:.2f} | {first / step:.2f} | "
+            detect, assemble = median(r["detect"] for r in rows), median(r["assemble"] for r in rows)
+            lines.append(f"| {name} | {rows[0]['cells']:,} | {label} | {step:.2f} | {detect:.2f} | {assemble:.2f} | "
+                         f"{solve:.2f} | {first / step:.2f} | "
                          f"{petsc_one / step:.2f} | {median(r['solver_iterations'] for r in rows):g} | "
                          f"{max(r['max_overlap'] for r in rows):.4f} | "
                          + ", ".join(f"{m:.0f}" for m in result["memory"]) + " |")
