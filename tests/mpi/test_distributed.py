@@ -149,6 +149,7 @@ def test_a_users_own_loop_runs_over_two_processes(tmp_path):
                           text=True, env=environment(), timeout=600, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "2 processes" in done.stdout and done.stdout.count("step ") == 5
+    assert "every process holds the same cells: True" in done.stdout
 
 
 def test_ctrl_c_of_mpiexec_saves_the_state_reached_on_every_process(tmp_path):
