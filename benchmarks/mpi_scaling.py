@@ -46,7 +46,7 @@ import json, resource, sys, time
 import numpy as np
 from qpcontact.io import load_colony
 from qpcontact.simulation import Settings
-from qpcontact.simulation.simulate import sink_drive, step_function
+from qpcontact.simulation.steps import sink_drive, step_function
 
 state, steps, how, ends = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
 solver = "ipm" if how == "ipm" else "ipm-petsc"

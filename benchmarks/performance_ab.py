@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from qpcontact.arguments import comma_list, positive_int
+from qpcontact.cli import comma_list, positive_int
 
 
 def load(root: str | None) -> ModuleType:

@@ -49,11 +49,11 @@ import qpcontact.solvers.cholesky as cholesky
 try:
     from qpcontact.io import load_colony
     from qpcontact.simulation.settings import Settings
-    from qpcontact.simulation.simulate import step_function
+    from qpcontact.simulation.steps import step_function
 except ImportError:  # a version before the wings of issue 28
     from qpcontact.colony import load_colony
-    from qpcontact.colony.settings import Settings
-    from qpcontact.colony.simulate import step_function
+    from qpcontact.simulation.settings import Settings
+    from qpcontact.simulation.simulate import step_function
 
 spent = dict(setup=0.0, refill=0.0, factor=0.0, solve=0.0)
 counts = dict(setup=0, refill=0, factor=0, solve=0)

@@ -5,7 +5,7 @@ separate processes with one worker killed in the middle of a run.
 ``python benchmarks/sweep_benchmark.py [--cells 2000] [--runs 8] [--workers 2] [--out DIR]`` (a developer's
 tool, from the repository root; not installed with the package)
 
-1. *One after the other*: :func:`qpcontact.ensembles.sweep.run_task` for seeds 1..runs in this
+1. *One after the other*: :func:`qpcontact.ensembles.tasks.run_task` for seeds 1..runs in this
    process (the work of each task, without Dask): wall time of each and in total.
 2. *Sweep*: ``qpcontact sweep`` of the same runs on a ``LocalCluster`` of ``--workers`` worker
    processes (cluster start included): wall time, speed-up over 1, and the overhead per task,
@@ -36,12 +36,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from qpcontact.arguments import positive_int, run_standalone
-from qpcontact.ensembles import sweep
+from qpcontact.cli import positive_int, run_standalone
+from qpcontact.ensembles import sweep, tasks
 from qpcontact.errors import OutputFolderError
+from qpcontact.io.outputs import prepare_folder, write_text
 from qpcontact.io.runs import RunFolder
-from qpcontact.outputs import prepare_folder, write_text
-from qpcontact.simulation.simulate import Settings
+from qpcontact.simulation.settings import Settings
 
 
 def one_after_the_other(cells: int, runs: int, out: Path) -> dict[str, Any]:
@@ -49,7 +49,7 @@ def one_after_the_other(cells: int, runs: int, out: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     for seed in range(1, runs + 1):
         t = time.perf_counter()
-        outcome = sweep.run_task(f"seed-{seed}", Settings().updated({"cells": cells, "seed": seed}).to_tables(),
+        outcome = tasks.run_task(f"seed-{seed}", Settings().updated({"cells": cells, "seed": seed}).to_tables(),
                                  str(out / "runs" / f"seed-{seed}"))
         if outcome["status"] != "done":
             raise RuntimeError(f"run seed-{seed} failed: {outcome['error']}")
@@ -98,7 +98,7 @@ def killed_worker(cells: int, runs: int, out: Path) -> dict[str, Any]:
     try:
         start("distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
               "--dashboard-address", ":0", "--scheduler-file", str(file))
-        wait_for(lambda: sweep.read_json(file), "the scheduler")
+        wait_for(lambda: tasks.read_json(file), "the scheduler")
         workers = {start("distributed.cli.dask_worker", "--scheduler-file", str(file), "--nthreads", "1", "--no-nanny",
                          "--no-dashboard").pid for _ in range(2)}
         folder = out / "sweep"
@@ -109,9 +109,9 @@ def killed_worker(cells: int, runs: int, out: Path) -> dict[str, Any]:
         def victim() -> tuple[str, int, int] | None:
             for seed in range(1, runs + 1):
                 run = folder / "runs" / f"seed-{seed}"
-                started = sweep.attempts_of(run)
+                started = tasks.attempts_of(run)
                 latest = RunFolder(run).latest_snapshot() if started else None
-                if latest is not None and not (run / sweep.RESULT_FILE).exists() and started[-1]["pid"] in workers:
+                if latest is not None and not (run / tasks.RESULT_FILE).exists() and started[-1]["pid"] in workers:
                     rows = RunFolder(run).read_history_rows()
                     return f"seed-{seed}", started[-1]["pid"], int(rows[-1]["step"]) if rows else -1
             return None
@@ -129,7 +129,7 @@ def killed_worker(cells: int, runs: int, out: Path) -> dict[str, Any]:
             process.wait()
     with (folder / sweep.SUMMARY_FILE).open(newline="") as fh:
         rows = list(csv.DictReader(fh))
-    starts = {f"seed-{seed}": sweep.attempts_of(folder / "runs" / f"seed-{seed}") for seed in range(1, runs + 1)}
+    starts = {f"seed-{seed}": tasks.attempts_of(folder / "runs" / f"seed-{seed}") for seed in range(1, runs + 1)}
     return {"exit_status": code, "wall": wall, "killed_run": name, "killed_at_step": reached,
             "continued_from_step": starts[name][-1]["from_step"] if len(starts[name]) > 1 else None,
             "runs_lost": sum(r["status"] != "done" for r in rows),

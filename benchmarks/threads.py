@@ -33,7 +33,7 @@ import numpy as np
 import qpcontact.solvers.cholesky as cholesky
 from qpcontact.io import load_colony
 from qpcontact.simulation.settings import Settings
-from qpcontact.simulation.simulate import step_function
+from qpcontact.simulation.steps import step_function
 factor_seconds = []
 real = cholesky.GramMatrix.factor
 def timed(self, w, d):

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import qpcontact as qc
-from qpcontact.simulation import Settings, simulate
+from qpcontact.simulation import Settings, loop
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,7 +32,7 @@ def main(argv: list[str] | None = None) -> int:
     settings = Settings()
     walls = qc.channel(args.width)
     options = {**settings.step_options(), "planes": walls}
-    colony = simulate.founder(settings)  # one cell at the origin, along x
+    colony = loop.founder(settings)  # one cell at the origin, along x
     rng = np.random.default_rng(settings.run.seed)
     while colony.cells.n < args.cells:
         colony = qc.divide(colony, settings.model.division_length, rng, axis_noise=settings.model.axis_noise,

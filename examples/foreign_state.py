@@ -27,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 import qpcontact as qc
-from qpcontact.timestep import PositionSettings, largest_overlap, position_step
+from qpcontact.geometry import largest_overlap
+from qpcontact.timestep import PositionSettings, position_step
 
 
 def packed_layer(rows: int, overlap: float, seed: int = 1) -> qc.Cells:

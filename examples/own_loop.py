@@ -17,8 +17,8 @@ import sys
 import numpy as np
 
 import qpcontact as qc
+from qpcontact.geometry import largest_overlap
 from qpcontact.simulation import Settings
-from qpcontact.timestep import largest_overlap
 
 #: Units of this example: µm, doubling times, mass = volume (as in qpcontact simulate).
 RADIUS = 0.5

@@ -20,9 +20,17 @@ top and are not imported here. docs/architecture.md describes the layout.
 
 from typing import Any
 
-from . import moved
+from . import moved  # first: it installs the old paths of moved modules, for one release
 from .assembly import ContactSystem, build_system
-from .colony import Colony, divide, expansion_time_step, grow, grow_position, growth_time_step
+from .colony import (
+    Colony,
+    divide,
+    expansion_time_step,
+    grow,
+    grow_position,
+    growth_time_step,
+    pressure_growth_rate,
+)
 from .errors import (
     InvalidArgumentError,
     InvalidCellsError,
@@ -44,21 +52,19 @@ from .timestep import (
     PositionSettings,
     PositionStepResult,
     StepResult,
+    VelocitySettings,
     cell_forces,
     cell_pressure,
     cell_stress,
     position_step,
-    pressure_growth_rate,
     step,
 )
-
-moved.install()  # the old paths of moved modules, for one release
 
 __version__ = "0.1.0"
 
 __all__ = [
     "FORMS", "FORMULATIONS", "Agreement", "CellMotion", "Cells", "Colony", "ContactImpulses", "PositionSettings",
-    "PositionStepResult", "StepFailedError", "grow_position", "growth_time_step", "position_step", "ContactSystem", "Contacts", "InvalidArgumentError", "PullingImpulseWarning",
+    "PositionStepResult", "StepFailedError", "VelocitySettings", "grow_position", "growth_time_step", "position_step", "ContactSystem", "Contacts", "InvalidArgumentError", "PullingImpulseWarning",
     "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
     "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
     "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
@@ -69,6 +75,5 @@ __all__ = [
 
 
 def __getattr__(name: str) -> Any:
-    """``qpcontact.cluster``, moved to :mod:`qpcontact.ensembles.cluster` (deprecated;
-    :mod:`qpcontact.moved`)."""
+    """A submodule that moved out of the top level (deprecated; :mod:`qpcontact.moved`)."""
     return moved.attribute(__name__, name, {})

@@ -2,7 +2,7 @@
 :mod:`qpcontact.errors` naming the argument and what was expected, never a raw ``TypeError``.
 
 At the level of :mod:`qpcontact.errors`: every wing may import it. (The command-line
-checks are in :mod:`qpcontact.arguments`.)
+checks are in :mod:`qpcontact.cli`.)
 """
 
 from __future__ import annotations

@@ -56,7 +56,7 @@ class StepFailedError(SolverFailedError):
     """A position-level colony step did not reach its overlap tolerance within its iteration cap,
     or one of its solves failed.
 
-    ``result`` holds the unconverged :class:`qpcontact.colony.PositionStepResult` (``converged``
+    ``result`` holds the unconverged :class:`qpcontact.timestep.PositionStepResult` (``converged``
     is False); the caller still holds the cells of the start of the step, which stand.
     """
 

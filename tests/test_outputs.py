@@ -1,4 +1,4 @@
-"""Output folders and files (qpcontact.outputs): checked before the work, written atomically."""
+"""Output folders and files (qpcontact.io.outputs): checked before the work, written atomically."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from qpcontact.errors import OutputFolderError
-from qpcontact.outputs import atomic_write, describe_written, prepare_folder, write_csv, write_text
+from qpcontact.io.outputs import atomic_write, describe_written, prepare_folder, write_csv, write_text
 
 
 def test_a_folder_that_cannot_be_written_is_refused_before_any_work(tmp_path):

@@ -64,7 +64,9 @@ def slot_inverse_mass(cells: Cells, index: np.ndarray) -> np.ndarray:
 
 
 def is_planar(cells: Cells, contacts: Contacts) -> bool:
-    """True when every contact normal and every contacting cell's axis lie in the xy-plane."""
+    """True when every contact normal and every contacting cell's axis lie in the xy-plane: the
+    system's planar reduction applies (a mechanics scene is planar by another test,
+    :func:`qpcontact.timestep.mechanics.is_monolayer_scene`)."""
     cells_in = np.concatenate([contacts.cell_a, contacts.cell_b[contacts.cell_b >= 0]])
     return bool(
         np.all(np.abs(contacts.normal[:, 2]) <= PLANAR_TOLERANCE)

@@ -428,7 +428,7 @@ def grow_position(colony: Colony, dt: float, *, drive: np.ndarray | None = None,
                   planar: bool | None = None, settings: PositionSettings | None = None,
                   warm: ContactImpulses | None = None, motion: CellMotion | None = None,
                   on_failure: str = "raise", comm: Any = None) -> tuple[Colony, PositionStepResult]:
-    """One growth step with the position-level :func:`qpcontact.colony.position_step`
+    """One growth step with the position-level :func:`qpcontact.timestep.position_step`
     (overdamped; no division: call :func:`divide` before it, so that the step clears the
     overlap the daughters' axis noise makes and the state it returns keeps its tolerance).
 

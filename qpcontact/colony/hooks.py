@@ -1,6 +1,6 @@
 """Model hooks: your own biology in a colony run, as CellModeller's model scripts do.
 
-A hook is a function ``hook(colony, step)`` that :func:`qpcontact.colony.run_colony` calls at
+A hook is a function ``hook(colony, step)`` that :func:`qpcontact.simulation.run_colony` calls at
 the start of every step, before the time step is chosen, with the colony (a
 :class:`~qpcontact.Colony`: ``cells``, ``ids``, ``parent_ids``, ``rates``, ``owed``, ``time``,
 ``cell_types``, ``cell_data``) and the step index. It returns
@@ -18,7 +18,7 @@ On the command line: ``qpcontact simulate --hook my_model.py``, where ``my_model
 
 A hook with a parameter named ``mechanics``, ``hook(colony, step, mechanics)``, is also given
 the cells' mechanics over the step that led to the colony (a
-:class:`~qpcontact.colony.CellMechanics`: ``pressure`` (N,), ``stress`` (N, 3, 3), one per cell
+:class:`~qpcontact.timestep.CellMechanics`: ``pressure`` (N,), ``stress`` (N, 3, 3), one per cell
 of ``colony``: cells divide at the start of a step, so each has its own; zero before the first
 step): growth that slows under pressure is
 ``colony.replace(rates=pressure_growth_rate(base, mechanics.pressure, ...))``

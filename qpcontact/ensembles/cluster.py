@@ -16,7 +16,7 @@ that may start child processes.
 
 Dask is the optional extra ``qpcontact[sweep]`` (``dask[distributed]``); :func:`require_distributed`
 says so in one line when it is missing. Nothing here is imported by ``import qpcontact``; Dask itself only when a client is opened.
-A top-level helper like :mod:`qpcontact.outputs` (the colony wing's sweep and the studies use it).
+A top-level helper like :mod:`qpcontact.io.outputs` (the colony wing's sweep and the studies use it).
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from ..arguments import positive_int
+from ..cli import positive_int
 from ..errors import InvalidArgumentError
 
 #: How to install Dask for qpcontact.

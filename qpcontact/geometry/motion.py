@@ -3,8 +3,9 @@
 - :func:`rotate`: vectors turned by rotation vectors (Rodrigues' formula, exact for any angle);
 - :func:`left_jacobian`: how the result of such a rotation moves when the rotation vector
   changes, the exact derivative the position-level step linearizes with;
-- :func:`move`: cells at the end of a step with given generalized momenta (overdamped motion
-  ``q ⊕ dt·W·p``), the motion map of :func:`qpcontact.colony.position_step`.
+- :func:`move`: cells at the end of a step with given generalized momenta (``q ⊕ dt·W·p``),
+  the one motion map of the position step (:func:`qpcontact.position_step`) and the velocity
+  step (:func:`qpcontact.step`).
 """
 
 from __future__ import annotations
@@ -62,19 +63,43 @@ def turning_vectors(cells: Cells, dt: float, momenta: np.ndarray) -> np.ndarray:
     return omega * dt
 
 
-def move(cells: Cells, dt: float, momenta: np.ndarray) -> Cells:
-    """The cells at the end of a step with generalized momenta ``momenta`` (N, 7): centres by
-    ``dt·p/m``, axes turned exactly by :func:`turning_vectors`, lengths by ``dt·g/G``. Masses and
-    inertia are those of ``cells`` (the start of the step); the returned cells carry
-    ``momenta``.
+def move(cells: Cells, dt: float, momenta: np.ndarray | None = None) -> Cells:
+    """The cells at the end of a step of overdamped or free motion with generalized momenta
+    ``momenta`` (N, 7) ``(p, L, g)``, the cells' own if None: centres by ``dt·p/m``, axes turned
+    exactly by :func:`turning_vectors` (a spin about a cell's own axis turns nothing), lengths
+    by ``dt·g/G``. Masses and inertia are those of ``cells`` (the start of the step); the
+    returned cells carry ``momenta``. The one motion map of both steps: the position step's
+    ``q ⊕ dt·W·p`` (:func:`qpcontact.position_step`) and the velocity step's move with the
+    post-contact momenta (:func:`qpcontact.step`).
 
     Raises:
-        InvalidArgumentError: a length would become negative.
+        InvalidArgumentError: a length would become negative (the step is too large for how
+            fast contacts compress that cell), or a position, turn or length would not be a
+            finite number (a huge ``dt``).
     """
+    if momenta is None:
+        momenta = cells.generalized_momenta()
     moving = cells.replace(momenta=momenta[:, 0:3], angular_momenta=momenta[:, 3:6], growth_momenta=momenta[:, 6])
-    lengths = cells.lengths + moving.growth_rates * dt
-    if np.any(lengths < 0):
-        i = int(np.flatnonzero(lengths < 0)[0])
-        raise InvalidArgumentError(f"dt = {dt!r}: cell {i} would reach length {lengths[i]:.3g} < 0")
-    return moving.replace(centers=cells.centers + moving.velocities * dt,
-                          axes=rotate(cells.axes, turning_vectors(cells, dt, momenta)), lengths=lengths)
+    with np.errstate(over="ignore", invalid="ignore"):
+        centers = cells.centers + moving.velocities * dt
+        turns = turning_vectors(cells, dt, momenta)
+        lengths = cells.lengths + moving.growth_rates * dt
+    _check_motion(moving, dt, centers, turns, lengths)
+    return moving.replace(centers=centers, axes=rotate(cells.axes, turns), lengths=lengths)
+
+
+def _check_motion(moving: Cells, dt: float, centers: np.ndarray, turns: np.ndarray, lengths: np.ndarray) -> None:
+    finite = np.isfinite(centers).all(axis=1) & np.isfinite(turns).all(axis=1) & np.isfinite(lengths)
+    if not finite.all():
+        i = int(np.flatnonzero(~finite)[0])
+        raise InvalidArgumentError(
+            f"dt = {dt!r} is too large: cell {i} would move, turn or grow beyond the range of numbers "
+            f"(speed {np.linalg.norm(moving.velocities[i]):.3g}, turning rate "
+            f"{np.linalg.norm(moving.angular_velocities[i]):.3g}, length rate {moving.growth_rates[i]:.3g}); take a "
+            "smaller time step")
+    negative = lengths < 0
+    if negative.any():
+        i = int(np.flatnonzero(negative)[0])
+        raise InvalidArgumentError(
+            f"dt = {dt!r} is too large: cell {i} would reach length {lengths[i]:.3g} < 0 "
+            f"(length rate {moving.growth_rates[i]:.3g}); take a smaller time step")

@@ -70,8 +70,8 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import positive_float
 from ..checks import number
+from ..cli import positive_float
 from ..colony.growth import Colony, volumes
 from ..errors import InvalidArgumentError, InvalidSnapshotError, OutputFolderError, QPContactError, RefusedPickleError
 from ..geometry import Cells
@@ -224,7 +224,7 @@ def pick_pickle(path: str | Path, step: int | None = None) -> Path:
 
 @dataclass
 class CellModellerState(Snapshot):
-    """A CellModeller state as a qpcontact snapshot (:class:`~qpcontact.colony.Snapshot`:
+    """A CellModeller state as a qpcontact snapshot (:class:`~qpcontact.io.Snapshot`:
     ``run_colony(settings, start=state)`` continues it, :meth:`save` writes it for
     ``qpcontact simulate --start``), with what the import left out.
 
@@ -244,7 +244,7 @@ class CellModellerState(Snapshot):
     notes: list[str] = field(default_factory=list)
 
     def save(self, path: str | Path) -> Path:
-        """Write the snapshot (:func:`qpcontact.colony.save_colony`, no random state: a run
+        """Write the snapshot (:func:`qpcontact.io.save_colony`, no random state: a run
         started from it draws from its own seed). Returns the path written."""
         return save_colony(path, self.colony, self.step, settings=self.settings)
 
@@ -460,7 +460,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from ..outputs import prepare_folder
+    from .outputs import prepare_folder
 
     if args.out.is_dir():
         raise InvalidArgumentError(f"--out {args.out}: a folder; give the snapshot's file name")

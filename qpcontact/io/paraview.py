@@ -15,7 +15,7 @@ the optional extra ``qpcontact[vtk]``) holds, for N cells:
   times in ``qpcontact simulate``); with the cells' mechanics (a run's snapshots) also
   ``pressure`` (compressive positive) and ``stress`` (9 components, the 3 × 3 virial stress row
   by row, tension positive; ParaView reads 9 components as a tensor): per footprint area in a
-  monolayer [force/µm], per volume in 3D [force/µm²] (:mod:`qpcontact.colony.mechanics`).
+  monolayer [force/µm], per volume in 3D [force/µm²] (:mod:`qpcontact.timestep.mechanics`).
 
 The ``.pvd`` collection lists the files with their simulated time, so that ParaView plays the
 run as a time series. To see capsules: open ``colony.pvd``, apply *Tube* to the lines with *Vary
@@ -36,8 +36,8 @@ import numpy as np
 
 from ..colony.growth import Colony
 from ..errors import InvalidArgumentError
-from ..outputs import atomic_write, replacing
 from ..timestep.mechanics import CellMechanics
+from .outputs import atomic_write, replacing
 
 #: The arrays on every point and cell, in order.
 ARRAYS = ("axis", "length", "radius", "id", "parent_id", "growth_rate", "velocity", "cell_type")

@@ -18,6 +18,8 @@ without pyplot, so importing this module leaves the process's matplotlib backend
   its own unit. Values that a log axis cannot show (zero: no overlap, no contact) are left out,
   not drawn at a floor.
 - :func:`animate`: a GIF of saved snapshots (matplotlib's ``PillowWriter``).
+- :func:`plot_ensemble`: a sweep's ``ensemble.png``, cell count and largest overlap against
+  time, mean and range across the runs of each group of settings.
 
 Lengths are labelled in µm and time in doubling times, the units of ``qpcontact simulate``
 (``length_unit``/``time_unit`` change the labels).
@@ -91,7 +93,7 @@ def category_map(count: int) -> Colormap:
 
 
 def pressure_label(planar: bool, length_unit: str = "µm") -> str:
-    """The axis or colour-bar label of a cell pressure (:mod:`qpcontact.colony.mechanics`):
+    """The axis or colour-bar label of a cell pressure (:mod:`qpcontact.timestep.mechanics`):
     2D [F/µm] or 3D [F/µm²], with what F is (:data:`FORCE_UNIT`)."""
     unit = f"F/{length_unit}" if planar else f"F/{length_unit}²"
     return f"{'2D ' if planar else ''}pressure [{unit}]\n({FORCE_UNIT})"
@@ -266,7 +268,7 @@ def plot_pressure_profile(path: str | Path, cells: Cells, pressure: Any, title: 
     """The radial pressure profile of a 2D colony: each cell's pressure (:func:`qpcontact.cell_pressure`)
     against the distance of its centre from the colony's centre (the mean of the centres), the mean
     and standard deviation in ``bins`` rings, and the least-squares parabola ``a (R² − r²)``
-    (:func:`~qpcontact.colony.mechanics.fit_parabola`; what a continuum model of a growing colony
+    (:func:`~qpcontact.timestep.mechanics.fit_parabola`; what a continuum model of a growing colony
     with friction predicts, docs/mechanics.md). ``label``: the pressure axis (default: the 2D
     pressure of ``qpcontact simulate``, :func:`pressure_label`)."""
     pressure_profile_figure(cells, pressure, title=title, bins=bins, label=label).savefig(path)
@@ -344,3 +346,38 @@ def animate(path: str | Path, frames: Sequence[tuple[float, Cells]], fps: int = 
     animation = FuncAnimation(fig, draw, frames=len(frames))
     animation.save(str(path), writer=PillowWriter(fps=fps))
     return Path(path)
+
+
+def plot_ensemble(path: Path, groups: Mapping[str, Sequence[Mapping[str, Sequence[float]]]]) -> Path:
+    """Cell count and largest overlap against time: for each group of runs (the same settings,
+    different seeds) the mean across the runs (a line) and their range (a band), each run's
+    history taken at common times up to its own end."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(11, 4.5), dpi=110, layout="constrained")
+    ax_cells, ax_overlap = fig.subplots(1, 2)
+    for index, (name, histories) in enumerate(groups.items()):
+        color = f"C{index % 10}"
+        end = max(h["time"][-1] for h in histories)
+        times = np.linspace(0.0, end, 300)
+        for ax, column in ((ax_cells, "cells"), (ax_overlap, "max_overlap")):
+            values = np.full((len(histories), len(times)), np.nan)
+            for row, history in enumerate(histories):
+                t = np.asarray(history["time"])
+                inside = times <= t[-1]
+                values[row, inside] = np.interp(times[inside], t, np.asarray(history[column]))
+            counted = np.sum(np.isfinite(values), axis=0) > 0
+            with np.errstate(all="ignore"):
+                mean = np.nanmean(values[:, counted], axis=0)
+                low, high = np.nanmin(values[:, counted], axis=0), np.nanmax(values[:, counted], axis=0)
+            ax.plot(times[counted], mean, color=color, lw=1.5,
+                    label=f"{name} ({len(histories)} run{'s' if len(histories) > 1 else ''})")
+            ax.fill_between(times[counted], low, high, color=color, alpha=0.2, lw=0)
+    ax_cells.set(xlabel="time [doubling times]", ylabel="cells", yscale="log", title="cell count: mean and range")
+    ax_overlap.set(xlabel="time [doubling times]", ylabel="largest overlap [fraction of the diameter]",
+                   title="largest overlap per step: mean and range")
+    ax_cells.legend(fontsize="small")
+    for ax in (ax_cells, ax_overlap):
+        ax.grid(alpha=0.3)
+    fig.savefig(path)
+    return path

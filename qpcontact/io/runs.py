@@ -1,18 +1,14 @@
-"""The machinery of a colony run that loses nothing: its output folder, its history, its
-snapshots, its stop on Ctrl-C, and how it continues.
+"""What a colony run writes so that it loses nothing: its output folder, its history, its
+snapshots, and how it continues (its clean stop on Ctrl-C is :mod:`qpcontact.simulation.signals`).
 
 - :class:`RunFolder`: the output folder of one run. :meth:`RunFolder.create` checks it before
   the run starts (created, writable, not holding another run unless ``overwrite``; with
   ``overwrite`` the earlier run's files are removed, none stays stale); :meth:`RunFolder.resume`
   continues the run of a folder from one of its snapshots. It appends one row per step to
   ``history.csv`` as the step completes, writes snapshots atomically
-  (:func:`qpcontact.colony.snapshots.save_colony`) carrying the settings, the step index and
-  the random generator's state, optionally ParaView files (:mod:`qpcontact.colony.paraview`),
+  (:func:`qpcontact.io.snapshots.save_colony`) carrying the settings, the step index and
+  the random generator's state, optionally ParaView files (:mod:`qpcontact.io.paraview`),
   and ``config.toml``, and lists what it wrote.
-- :class:`Interrupt`: SIGINT (Ctrl-C) and SIGTERM stop a run cleanly. A signal that arrives
-  during a step abandons that step (nothing of it is applied, the random generator is put back)
-  and the run ends with the state reached, which is saved; one that arrives between steps ends
-  the run after the step. A second Ctrl-C while the outputs are written does not stop the saving.
 - TOML: :func:`write_toml` / :func:`read_toml`, the settings' tables (``config.toml``).
 
 Resuming: a run continued from a snapshot of step S (``qpcontact simulate --resume`` or
@@ -27,26 +23,28 @@ further than its last snapshot before being killed); snapshots after S are refus
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import json
 import math
 import re
-import signal
-import threading
 import tomllib
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import numpy as np
 
+from .. import moved
 from ..colony.growth import Colony
 from ..errors import InvalidArgumentError, OutputFolderError
-from ..outputs import atomic_write, earlier_outputs, prepare_folder, write_text
 from ..timestep.mechanics import CellMechanics
+from .outputs import atomic_write, earlier_outputs, prepare_folder, write_text
 from .snapshots import Snapshot, save_colony
+
+
+def __getattr__(name: str) -> Any:
+    """The names that moved out of this module (deprecated; :mod:`qpcontact.moved`)."""
+    return moved.attribute(__name__, name, moved.NAMES[__name__])
 
 #: Columns of ``history.csv``, one row per step.
 HISTORY_FIELDS = ("step", "time", "dt", "cells", "contacts", "max_overlap", "mean_overlap", "solve_seconds",
@@ -60,7 +58,7 @@ TIMING_FIELDS = ("solve_seconds", "step_seconds")
 #: Every file a run writes in its folder (glob patterns, relative to it).
 RUN_OUTPUTS = ("config.toml", "history.csv", "snapshots/step_*.npz", "colony.png", "history.png", "colony.gif",
                "colony.pvd", "vtk/step_*.vtu", "pressure.png")
-#: Temporary files of writes that a killed process left (``qpcontact.outputs.replacing``).
+#: Temporary files of writes that a killed process left (``qpcontact.io.outputs.replacing``).
 LEFTOVERS = (".*.tmp", "snapshots/.*.tmp", "vtk/.*.tmp")
 _STEP_FILE = re.compile(r"step_(\d+)\.(npz|vtu)")
 
@@ -242,57 +240,6 @@ def is_inside(snapshot: Path, folder: Path) -> bool:
     return snapshot.resolve().parent == (folder / "snapshots").resolve()
 
 
-class Interrupt:
-    """Stop a run cleanly on SIGINT (Ctrl-C) or SIGTERM (module docstring).
-
-    Use as a context manager around the loop; run each step inside :meth:`armed`. A signal that
-    arrives while armed raises ``KeyboardInterrupt`` there (the caller abandons the step); at any
-    other time it only sets :attr:`signal`, and the caller stops after what it is doing. Outside
-    the main thread the handlers cannot be installed, and Python's own ``KeyboardInterrupt``
-    takes their place.
-    """
-
-    SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-    def __init__(self) -> None:
-        self.signal: int | None = None
-        self._armed = False
-        self._previous: dict[int, Any] = {}
-
-    @property
-    def requested(self) -> bool:
-        return self.signal is not None
-
-    def __enter__(self) -> Interrupt:
-        if threading.current_thread() is threading.main_thread():
-            for number in self.SIGNALS:
-                self._previous[number] = signal.signal(number, self._handle)
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        for number, handler in self._previous.items():
-            signal.signal(number, handler)
-        self._previous.clear()
-
-    def _handle(self, number: int, frame: FrameType | None) -> None:
-        self.signal = number
-        if self._armed:
-            self._armed = False
-            raise KeyboardInterrupt
-
-    @contextlib.contextmanager
-    def armed(self) -> Iterator[None]:
-        self._armed = True
-        try:
-            yield
-        finally:
-            self._armed = False
-
-    def exit_status(self) -> int:
-        """128 + the signal's number (130 for Ctrl-C), the shell's convention."""
-        return 128 + (self.signal or signal.SIGINT)
-
-
 # -- TOML ---------------------------------------------------------------------------------
 def _toml_value(value: Any) -> str:
     if value is None:
@@ -330,7 +277,7 @@ def write_toml(values: Mapping[str, Any], comment: str = "") -> str:
 
 def read_toml(path: str | Path) -> dict[str, Any]:
     """A TOML file as a mapping (what its tables and keys mean is the reader's:
-    :func:`qpcontact.colony.settings.file_layer`).
+    :func:`qpcontact.simulation.settings.file_layer`).
 
     Raises:
         InvalidArgumentError: the file is missing or not TOML.

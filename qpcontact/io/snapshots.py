@@ -1,6 +1,6 @@
 """Colony snapshots as NPZ files (one per saved step), loadable back into a :class:`Colony` and,
 with the run's settings, step index and random-generator state, enough to continue a run
-exactly (:mod:`qpcontact.colony.runs`); and the one mapping between :class:`~qpcontact.Cells`
+exactly (:mod:`qpcontact.io.runs`); and the one mapping between :class:`~qpcontact.Cells`
 and NPZ arrays (:func:`cell_arrays`, :func:`cells_from_arrays`), which the benchmark's scene
 cache uses too (:func:`save_cells`, :func:`load_cells`: the cell arrays alone, same names).
 
@@ -32,7 +32,7 @@ key                    shape        meaning
                                     of versions 1 and 2 load with every type 0)
 *optional (version 2)*
 ``settings``           ()           JSON object (a string): the run's settings
-                                    (:class:`qpcontact.colony.Settings` fields)
+                                    (:class:`qpcontact.simulation.Settings` fields)
 ``rng_state``          ()           JSON object (a string): the random generator's state,
                                     ``numpy.random.Generator.bit_generator.state``
 ``extra.<name>``       any          extra per-run state, arrays keyed by name (letters,
@@ -63,7 +63,7 @@ files without them load with ``mechanics`` None. A run can start from either
 (``qpcontact simulate --start FILE``): from version 1, or a file without ``rng_state``, the
 random generator starts from the run's seed. Other tools may write either version.
 
-Snapshots are written through a temporary file and a rename (:func:`qpcontact.outputs.atomic_write`),
+Snapshots are written through a temporary file and a rename (:func:`qpcontact.io.outputs.atomic_write`),
 so a killed process never leaves a truncated one. :func:`load_snapshot` checks everything above
 and raises :class:`~qpcontact.errors.InvalidSnapshotError` naming the file and the problem for a
 missing, truncated, corrupted or inconsistent file. The checksum catches what the ZIP container's
@@ -95,8 +95,8 @@ from ..checks import instance
 from ..colony.growth import Colony
 from ..errors import InvalidArgumentError, InvalidSnapshotError, QPContactError
 from ..geometry import Cells
-from ..outputs import atomic_write
 from ..timestep.mechanics import CellMechanics
+from .outputs import atomic_write
 
 FORMAT = "qpcontact-colony"
 VERSION = 3
@@ -215,7 +215,7 @@ def save_colony(path: str | Path, colony: Colony, step: int = -1, *, settings: M
         rng: the run's random generator (or its ``bit_generator.state``), stored to continue the
             run on the same random numbers.
         extra: extra arrays by name (e.g. a solver's warm-start data).
-        mechanics: each cell's pressure and stress (:class:`~qpcontact.colony.CellMechanics`),
+        mechanics: each cell's pressure and stress (:class:`~qpcontact.timestep.CellMechanics`),
             stored as ``pressure``, ``stress`` and ``stress_dimensions``.
 
     Returns:

@@ -6,12 +6,12 @@
   ``radius``, ``rate`` (elongation rate [1/time]), ``owed`` (length still owed from division);
   with the cells' mechanics (a run's snapshots) ``pressure`` and the nine components of the
   stress, ``stress_xx``, ``stress_xy``, ... ``stress_zz`` (row by row; units:
-  :mod:`qpcontact.colony.mechanics`); then each of the model's own per-cell arrays
+  :mod:`qpcontact.timestep.mechanics`); then each of the model's own per-cell arrays
   (``Colony.cell_data``) under its name (``name_0``, ``name_1``, ... for several numbers per
   cell; ``data_<name>`` if the name is taken above). Lengths in µm and time in doubling times
   for a run of ``qpcontact simulate``.
 - :func:`colony_frame`, :func:`run_frame`: the same as pandas DataFrames, and a run's time series
-  (``history.csv``; columns :data:`~qpcontact.colony.runs.HISTORY_FIELDS`). pandas is the
+  (``history.csv``; columns :data:`~qpcontact.io.runs.HISTORY_FIELDS`). pandas is the
   optional extra ``qpcontact[table]`` (with pyarrow, for Parquet files); it is imported only
   by these.
 - ``qpcontact table RUN_OR_SNAPSHOT``: a snapshot's cells (or, for a run folder, those of its
@@ -34,8 +34,8 @@ import numpy as np
 
 from ..colony.growth import Colony
 from ..errors import InvalidArgumentError, OutputFolderError
-from ..outputs import atomic_write
 from ..timestep.mechanics import CellMechanics
+from .outputs import atomic_write
 from .runs import HISTORY_FIELDS, RunFolder, latest_snapshot
 from .snapshots import Snapshot, load_snapshot
 
@@ -84,7 +84,7 @@ def colony_frame(source: Colony | Snapshot | str | Path, mechanics: CellMechanic
     """One row per cell (:func:`colony_columns`) as a ``pandas.DataFrame``.
 
     Args:
-        source: a :class:`~qpcontact.Colony`, a :class:`~qpcontact.colony.Snapshot`, a snapshot
+        source: a :class:`~qpcontact.Colony`, a :class:`~qpcontact.io.Snapshot`, a snapshot
             file (``.npz``), or a run's folder (its latest snapshot).
         mechanics: the cells' pressure and stress, for a Colony (a snapshot's own are used).
 
@@ -117,7 +117,7 @@ def colony_frame(source: Colony | Snapshot | str | Path, mechanics: CellMechanic
 
 def run_frame(folder: str | Path) -> Any:
     """A run's time series (its ``history.csv``: one row per step, columns
-    :data:`~qpcontact.colony.runs.HISTORY_FIELDS`, counts as integers) as a ``pandas.DataFrame``.
+    :data:`~qpcontact.io.runs.HISTORY_FIELDS`, counts as integers) as a ``pandas.DataFrame``.
 
     Raises:
         InvalidArgumentError: pandas is not installed; the folder has no history or not a run's.
@@ -254,6 +254,6 @@ def _emit(out: Path | None, write: Any) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..arguments import run_standalone
+    from ..cli import run_standalone
 
     return run_standalone("qpcontact table", add_arguments, run_command, argv)

@@ -1,10 +1,16 @@
-"""``qpcontact plot SNAPSHOT``: draw a saved snapshot again as its run drew ``colony.png``.
+"""The pictures of a colony run, and ``qpcontact plot SNAPSHOT``, which draws a saved snapshot
+again as its run drew ``colony.png``.
 
-The picture is :func:`qpcontact.colony.simulate.colony_picture` of the snapshot's colony, with
+- :func:`draw_pictures`: what a run draws at its end (``colony.png``, ``history.png``,
+  ``pressure.png`` in 2D, ``colony.gif``), titled with what ran (:func:`describe_run`);
+- :func:`colony_picture`: the picture of a colony as a run draws it;
+- :func:`plot_snapshot` and the command ``qpcontact plot``.
+
+The picture of ``qpcontact plot`` is :func:`colony_picture` of the snapshot's colony, with
 the run's settings stored in the snapshot (dimensions, planes, the step and solver in the
 title): from above, and from the side too in 3D, coloured by ``--color`` (orientation,
 pressure, cell_type, or the name of one of the model's own per-cell arrays,
-:func:`qpcontact.colony.plots.colony_colors`). A snapshot without settings (version 1, or
+:func:`qpcontact.io.plots.colony_colors`). A snapshot without settings (version 1, or
 written by another tool) is drawn with the default settings, in 3D if a cell lies off the plane
 ``z = 0``.
 """
@@ -17,10 +23,70 @@ from pathlib import Path
 
 import numpy as np
 
+from ..colony.growth import Colony
 from ..errors import InvalidArgumentError, OutputFolderError
+from ..io.runs import RunFolder
 from ..io.snapshots import Snapshot, load_snapshot
 from ..io.tables import snapshot_file
-from .settings import Settings
+from ..timestep.mechanics import CellMechanics
+from .loop import Run
+from .settings import COLORS, Settings
+
+__all__ = ["add_arguments", "colony_picture", "describe_run", "draw_pictures", "main", "plot_snapshot", "run_command",
+           "snapshot_settings"]
+
+
+def describe_run(settings: Settings) -> str:
+    """What ran, for the pictures' titles: ``"2D, position step, ipm at tolerance 0.001,
+    overlap ≤ 0.01"`` (:meth:`Settings.describe_step`), with the pressure-dependent growth on a
+    second line if it is on (:meth:`Settings.describe_growth`)."""
+    label = f"{settings.run.dimensions}D, {settings.describe_step()}"
+    return label if settings.model.pressure_growth == "off" else f"{label}\n{settings.describe_growth()}"
+
+
+def colony_picture(path: Path, colony: Colony, mechanics: CellMechanics | None, settings: Settings, color: str,
+                   title: str) -> Path:
+    """The picture of a colony as a run draws it (``colony.png``): from above, and from the side
+    too in 3D, with the run's planes, coloured as ``color`` says
+    (:func:`~qpcontact.io.plots.colony_colors`: orientation, pressure, cell_type, or a
+    ``cell_data`` array's name)."""
+    from ..io.plots import colony_colors, save_colony_picture
+
+    planar = settings.run.dimensions == 2
+    return save_colony_picture(path, colony.cells, title, side_view=not planar, planes=settings.planes(),
+                               **colony_colors(color, colony, mechanics, planar))
+
+
+def draw_pictures(folder: RunFolder, settings: Settings, result: Run, *, gif: bool, color: str = "orientation") -> None:
+    """``colony.png`` (and a side view in 3D, :func:`colony_picture`), coloured by the cells'
+    orientation or, with ``color="pressure"``, by their pressure of the last step
+    (:attr:`Run.mechanics`, with a colour bar in its units), or with ``"cell_type"`` by their
+    type; ``history.png`` of the whole run (earlier attempts of a resumed run
+    included); in 2D ``pressure.png``, the radial pressure profile
+    (:func:`~qpcontact.io.plots.plot_pressure_profile`); ``colony.gif`` from this run's
+    frames. Titled with what ran (:func:`describe_run`).
+
+    Raises:
+        InvalidArgumentError: ``color`` is not one of :data:`COLORS`.
+    """
+    from ..io.plots import animate, plot_history, plot_pressure_profile
+
+    if color not in COLORS:
+        raise InvalidArgumentError(f"color: expected one of {', '.join(COLORS)}, got {color!r}")
+    label = describe_run(settings)
+    cells, planar = result.colony.cells, settings.run.dimensions == 2
+    mechanics = result.mechanics or CellMechanics.zero(cells.n, planar)
+    when = f"{cells.n} cells at t = {result.colony.time:.2f} doubling times"
+    folder.note(colony_picture(folder.path / "colony.png", result.colony, mechanics, settings, color,
+                               f"{when} ({label})"))
+    if planar and cells.n:
+        folder.note(plot_pressure_profile(folder.path / "pressure.png", cells, mechanics.pressure,
+                                          f"{when}: pressure over the last step\n{label}"))
+    history = folder.read_history()
+    if history["step"]:
+        folder.note(plot_history(folder.path / "history.png", history, label))
+    if gif and len(result.frames) > 1:
+        folder.note(animate(folder.path / "colony.gif", result.frames))
 
 
 def snapshot_settings(snapshot: Snapshot) -> Settings:
@@ -40,8 +106,6 @@ def plot_snapshot(snapshot: Snapshot, path: str | Path, color: str = "orientatio
         InvalidArgumentError: ``color`` names nothing to colour by, or ``pressure`` for a
             snapshot without the cells' mechanics.
     """
-    from .simulate import colony_picture, describe_run
-
     if color == "pressure" and snapshot.mechanics is None:
         raise InvalidArgumentError(f"--color pressure: {snapshot.path} holds no pressure (written before issue 19, or "
                                    "by another tool)")
@@ -85,6 +149,6 @@ def run_command(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from ..arguments import run_standalone
+    from ..cli import run_standalone
 
     return run_standalone("qpcontact plot", add_arguments, run_command, argv)

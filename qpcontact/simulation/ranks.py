@@ -19,9 +19,9 @@ from collections.abc import Iterator
 from typing import Any
 
 from ..errors import InvalidArgumentError
-from ..io.runs import Interrupt
 from ..solvers.ipm import UNKNOWNS_ACCURACY
 from .settings import Settings
+from .signals import Interrupt
 
 #: What MPI launchers put in each process's environment: the number of processes (Open MPI's
 #: mpiexec; MPICH's and Intel MPI's, through PMI; Slurm's srun, for its job step).
@@ -87,7 +87,7 @@ def distributed_settings(settings: Settings, comm: Any) -> tuple[Settings, str]:
 
 
 class CollectiveInterrupt(Interrupt):
-    """:class:`~qpcontact.io.runs.Interrupt` for a run over MPI processes: a signal never
+    """:class:`~qpcontact.simulation.signals.Interrupt` for a run over MPI processes: a signal never
     abandons a step (the other processes would wait in the step's solve for ever); the run stops
     at the end of the step, on every process at once, as soon as any of them has had one."""
 

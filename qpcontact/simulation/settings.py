@@ -1,17 +1,18 @@
 """The settings of a colony run (``qpcontact simulate``, ``qpcontact sweep``, :func:`run_colony`),
-nested by concern, each described once with its unit (:func:`qpcontact.described.setting`):
+nested by concern, each described once with its unit (:func:`qpcontact.schema.setting`):
 
 - ``[model]``, :class:`ModelSettings` (flags ``--radius``, ...): the cells and how they grow;
 - ``[run]``, :class:`RunSettings` (``--cells``, ...): size, dimensions, seed, the step, the time
   step;
 - ``[output]``, :class:`OutputSettings` (``--snapshot-every``, ``--vtk``, ``--gif``,
   ``--color``): what a run writes besides its history and last state;
-- ``[position]``, :class:`~qpcontact.colony.PositionSettings` (``--position-*``): the
+- ``[position]``, :class:`~qpcontact.timestep.PositionSettings` (``--position-*``): the
   position-level step;
-- ``[velocity]``, :class:`VelocitySettings` (``--velocity-*``): the velocity-level step.
+- ``[velocity]``, :class:`~qpcontact.timestep.VelocitySettings` (``--velocity-*``): the
+  velocity-level step.
 
 :class:`Settings` holds one of each. Everything users see is generated from the descriptions
-(:mod:`qpcontact.described`): the flags of ``simulate`` and ``sweep`` (:func:`add_setting_flags`),
+(:mod:`qpcontact.schema`): the flags of ``simulate`` and ``sweep`` (:func:`add_setting_flags`),
 the TOML tables of ``config.toml`` and ``--config`` (:func:`file_layer`, :meth:`Settings.to_tables`),
 the names of ``sweep --vary``, the checks, the help texts and the API reference. Each setting has
 one name: its key in its table, with the table's prefix for the two step tables
@@ -49,15 +50,16 @@ from typing import Any
 
 import numpy as np
 
-from .. import described
+from .. import schema
 from ..colony.growth import Colony, check_division_length, expansion_time_step, growth_time_step
-from ..described import Layer, Setting, check_fields, documented, setting, settings_of, table
+from ..colony.pressure import GROWTH_LAWS
 from ..errors import InvalidArgumentError
 from ..geometry.surfaces import Plane, substrate
 from ..io.runs import read_toml
-from ..solvers import FORMS, QP_FORMULATIONS, get_solver
-from ..timestep.mechanics import GROWTH_LAWS
+from ..schema import Layer, Setting, check_fields, documented, setting, settings_of, table
+from ..solvers import get_solver
 from ..timestep.position import PositionSettings, search_margin
+from ..timestep.step import VelocitySettings
 
 __all__ = ["COLORS", "FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSettings", "Settings", "VelocitySettings",
            "add_setting_flags", "check_continuation", "file_layer", "flag_layer", "merge", "refuse_unused",
@@ -65,7 +67,7 @@ __all__ = ["COLORS", "FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSett
 
 
 #: What ``colony.png`` can colour the cells by (``[output] color``; the colourings of
-#: :func:`qpcontact.colony.plots.colony_colors`).
+#: :func:`qpcontact.io.plots.colony_colors`).
 COLORS = ("orientation", "pressure", "cell_type")
 #: The unit of the cells' pressure of a run, and so of ``stall_pressure``: F is the force that moves
 #: 1 µm³ of free cell at 1 µm per doubling time (docs/mechanics.md).
@@ -149,7 +151,7 @@ class RunSettings:
     step: str = setting(
         "position", unit="", choices=("position", "velocity"),
         help="position: no overlap beyond the position step's tolerance at the end of each step "
-             "(qpcontact.colony.position_step); velocity: contacts stop approaching at its start (qpcontact.step; "
+             "(qpcontact.timestep.position_step); velocity: contacts stop approaching at its start (qpcontact.step; "
              "the earlier step, kept for comparison)")
     time_step: str = setting(
         "auto", unit="", choices=("auto", "growth", "expansion"),
@@ -196,39 +198,6 @@ class OutputSettings:
         check_fields(self)
 
 
-@documented
-@dataclass(frozen=True)
-class VelocitySettings:
-    """``[velocity]``: the velocity-level step (``--step velocity``, :func:`qpcontact.step`):
-    contacts stop approaching at the start of each step; flags ``--velocity-*``."""
-
-    solver: str = setting("clarabel", unit="",
-                          help="the contact solver: linear, mprgp, ipm or an installed qpsolvers backend (clarabel, "
-                               "osqp, ...)")
-    formulation: str = setting("complementarity", unit="", choices=QP_FORMULATIONS,
-                               help="the QP formulation (a plain solver such as linear solves the plain problem)")
-    form: str = setting("auto", unit="", choices=("auto", *FORMS), help="the QP form handed to the solver")
-    tolerance: float = setting(
-        1e-6, unit="dimensionless, scaled", above=0, below=1,
-        help="the solver's tolerance: an accepted answer's penetration and complementarity residual are at most "
-             "min(100 × tolerance, 0.1) of the fastest approach")
-    margin: float = setting(0.3, unit="µm", at_least=0, help="speculative contact margin: pairs this close are "
-                                                              "constraints")
-    position_correction: float = setting(0.5, unit="dimensionless", at_least=0, at_most=1,
-                                         help="fraction of each overlap cleared per step (0: off)")
-    overlap_limit: float = setting(
-        0.0, unit="fraction of the diameter", at_least=0,
-        help="retry a step with half the step when it leaves a larger overlap than this and than before it (0: off; "
-             "it cost 4.5 times the time of a 3D run, docs/colony.md)")
-    dynamics: str = setting("overdamped", unit="", choices=("overdamped", "inertial"),
-                            help="overdamped: the momenta are reset to the drive every step; inertial: they carry over")
-    damping: float = setting(0.0, unit="1/doubling time", at_least=0,
-                             help="inertial dynamics: damping rate of the momenta")
-
-    def __post_init__(self) -> None:
-        check_fields(self)
-
-
 @dataclass(frozen=True)
 class Settings:
     """Everything that defines a colony run, one table per concern (module docstring). Saved
@@ -242,7 +211,7 @@ class Settings:
         model: :class:`ModelSettings`.
         run: :class:`RunSettings`.
         output: :class:`OutputSettings`.
-        position: :class:`~qpcontact.colony.PositionSettings`, the position step.
+        position: :class:`~qpcontact.timestep.PositionSettings`, the position step.
         velocity: :class:`VelocitySettings`, the velocity step.
     """
 
@@ -364,7 +333,7 @@ class Settings:
     def to_tables(self, *, applying: bool = False) -> dict[str, dict[str, Any]]:
         """``{table: {key: value}}`` (snapshots store all; ``applying``: only the settings that
         apply to this run, as ``config.toml`` shows them)."""
-        return described.to_tables(self, (lambda s: not self.unused(s)) if applying else None)
+        return schema.to_tables(self, (lambda s: not self.unused(s)) if applying else None)
 
     def updated(self, values: Mapping[str, Any], source: str = "settings") -> Settings:
         """These settings with ``values`` replaced, by name (``cells``, ``position_tolerance``)
@@ -375,10 +344,10 @@ class Settings:
         """
         paths = {}
         for name, value in values.items():
-            s = described.find_setting(Settings, name)
+            s = schema.find_setting(Settings, name)
             if s is None:
                 raise InvalidArgumentError(f"{source}: unknown setting {name!r}; known: "
-                                           f"{described.known_names(Settings)}")
+                                           f"{schema.known_names(Settings)}")
             paths[s.path] = value
         return merge([Layer(source, paths)], base=self)
 
@@ -394,8 +363,8 @@ def merge(layers: Iterable[Layer], base: Settings | None = None) -> Settings:
     """The one merge of a run's settings: ``base`` (default: the defaults), then each layer in
     order, later winning (simulate: the snapshot's settings, ``--config``, the flags; sweep:
     ``--config``, the flags, then each run's varied values); each value checked, each file path
-    made absolute (:func:`qpcontact.described.merge`)."""
-    return described.merge(Settings, layers, base)
+    made absolute (:func:`qpcontact.schema.merge`)."""
+    return schema.merge(Settings, layers, base)
 
 
 #: The names of the flat settings table of earlier versions (config.toml, snapshots, sweeps)
@@ -422,13 +391,13 @@ def stored_values(values: Mapping[str, Any], source: str) -> dict[str, Any]:
         InvalidArgumentError: an unknown table or name, listing the known ones.
     """
     tables = {k: v for k, v in values.items() if isinstance(v, Mapping)}
-    out = described.values_of_tables(Settings, tables, source)
+    out = schema.values_of_tables(Settings, tables, source)
     for name, value in values.items():
         if isinstance(value, Mapping):
             continue
         path = _former_path(name)
         if path is None:
-            raise InvalidArgumentError(f"{source}: unknown setting {name!r}; known: {described.known_names(Settings)} "
+            raise InvalidArgumentError(f"{source}: unknown setting {name!r}; known: {schema.known_names(Settings)} "
                                        "(or the flat names of earlier versions)")
         out[path] = value
     return out
@@ -444,7 +413,7 @@ def file_layer(path: Path, values: Mapping[str, Any] | None = None) -> Layer:
 def flag_layer(args: argparse.Namespace) -> Layer:
     """The settings given as flags (:func:`add_setting_flags`), file paths relative to the
     current directory."""
-    return Layer("command line", described.flags_given(Settings, args), "flags", relative_to=Path.cwd())
+    return Layer("command line", schema.flags_given(Settings, args), "flags", relative_to=Path.cwd())
 
 
 def refuse_unused(runs: Sequence[Settings], layers: Iterable[Layer]) -> None:
@@ -460,7 +429,7 @@ def refuse_unused(runs: Sequence[Settings], layers: Iterable[Layer]) -> None:
             continue
         for path, value in layer.values.items():
             s = by_path[path]
-            if layer.kind == "file" and described.coerce(s, value) == s.default:
+            if layer.kind == "file" and schema.coerce(s, value) == s.default:
                 continue
             reasons = [run.unused(s) for run in runs]
             if all(reasons):
@@ -502,9 +471,9 @@ def check_continuation(state: Settings, layers: Iterable[Layer], *, in_place: bo
         for path, value in layer.values.items():
             s = by_path[path]
             before = getattr(getattr(state, s.table), s.key)
-            if path in kept and described.coerce(s, value) != before:
-                why = kept[path].format(value=described.show(before))
-                refused.append(f"{layer.source}: {layer.label(s)} {described.show(value)}: {why}")
+            if path in kept and schema.coerce(s, value) != before:
+                why = kept[path].format(value=schema.show(before))
+                refused.append(f"{layer.source}: {layer.label(s)} {schema.show(value)}: {why}")
     if refused:
         raise InvalidArgumentError(f"a run continued from a snapshot keeps these settings: {'; '.join(refused)}")
 
@@ -518,7 +487,7 @@ def add_setting_flags(parser: argparse.ArgumentParser, title: str = "") -> None:
                        *FORMER_NAMES.items()]:
         flag = "--" + name.replace("_", "-")
         if flag not in current:
-            s = described.find_setting(Settings, path)
+            s = schema.find_setting(Settings, path)
             assert s is not None
             if s not in refused.setdefault(flag, []):
                 refused[flag].append(s)
@@ -527,4 +496,4 @@ def add_setting_flags(parser: argparse.ArgumentParser, title: str = "") -> None:
 
     why = {flag: ("each step has its own: " if len(found) > 1 else "use ") + " or ".join(map(where, found))
            for flag, found in refused.items()}
-    described.add_flags(Settings, parser, lambda table_name, info: f"[{table_name}] {info.help}{title}", why)
+    schema.add_flags(Settings, parser, lambda table_name, info: f"[{table_name}] {info.help}{title}", why)

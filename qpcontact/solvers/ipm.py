@@ -2,7 +2,7 @@
 
     min ½‖ỹ‖²   s.t.   B̃ỹ ≥ b̃,   l ≤ ỹ ≤ u   (l, u optional, per column, may be ±inf),
 
-the solver of the position-level colony step (:mod:`qpcontact.colony.position`), which bounds the
+the solver of the position-level colony step (:mod:`qpcontact.timestep.position`), which bounds the
 turning and the shrinking of each cell per step. Why an interior-point method: the contact graph
 of a grown, jammed colony is nearly isostatic, so many active contacts are redundant and their
 impulses are not unique, and about 8 % of the contacts change between pushing and not pushing

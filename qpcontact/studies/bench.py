@@ -53,13 +53,13 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import add_output_arguments, comma_list, non_negative_int, positive_float, positive_int, run_standalone
-from ..arguments import tolerance as tolerance_type
 from ..assembly import ContactSystem, build_system
+from ..cli import add_output_arguments, comma_list, non_negative_int, positive_float, positive_int, run_standalone
+from ..cli import tolerance as tolerance_type
 from ..errors import OutputFolderError
 from ..geometry import Cells, colliding, find_contacts
+from ..io.outputs import describe_written, prepare_folder, write_text
 from ..io.snapshots import load_cells, save_cells
-from ..outputs import describe_written, prepare_folder, write_text
 from ..resolve import active_set_polish, metrics, reference_solution, solve_system
 from ..solvers import available_solvers, get_solver, solve_min_norm
 from . import scenes

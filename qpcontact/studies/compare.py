@@ -51,14 +51,14 @@ from typing import Any
 import numpy as np
 import qpsolvers
 
-from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
-from ..arguments import tolerance as tolerance_type
 from ..assembly import ContactSystem, build_system
+from ..cli import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
+from ..cli import tolerance as tolerance_type
 from ..ensembles import cluster
 from ..errors import InvalidArgumentError, UnknownSolverError
 from ..geometry import colliding, find_contacts
-from ..outputs import describe_written, prepare_folder, write_text
-from ..outputs import write_csv as write_table
+from ..io.outputs import describe_written, prepare_folder, write_text
+from ..io.outputs import write_csv as write_table
 from ..resolve import metrics, solve_system
 from ..solvers import QP_FORMS, available_solvers, get_solver
 from . import harness

@@ -13,12 +13,12 @@ import time
 import warnings
 from pathlib import Path
 
-from ..arguments import non_negative_int, positive_int, run_standalone
-from ..arguments import tolerance as tolerance_type
 from ..assembly import build_system
+from ..cli import non_negative_int, positive_int, run_standalone
+from ..cli import tolerance as tolerance_type
 from ..errors import PullingImpulseWarning, QPContactError
 from ..geometry import colliding, find_contacts
-from ..outputs import describe_written, prepare_folder, write_text
+from ..io.outputs import describe_written, prepare_folder, write_text
 from ..resolve import metrics, reference_solution, resolve
 from ..solvers import FORMULATIONS, available_solvers, get_solver
 from .scenes import colony_2d, colony_3d

@@ -41,12 +41,12 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
+from ..cli import add_output_arguments, comma_list, positive_float, positive_int, run_standalone
 from ..colony import Colony
 from ..io import load_colony, save_colony
-from ..outputs import atomic_write, describe_written, prepare_folder, write_text
+from ..io.outputs import atomic_write, describe_written, prepare_folder, write_text
 from ..simulation import Settings, run_colony
-from ..simulation.simulate import sink_drive, step_function
+from ..simulation.steps import sink_drive, step_function
 from ..timestep import PositionStepResult
 from .bench import machine_description
 from .harness import guarded

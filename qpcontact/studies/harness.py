@@ -8,7 +8,7 @@
   deadlock on the inherited thread pool (measured: a 20 s guard hit on a solve that takes
   0.08 s in a fresh process).
 
-(The tables' CSV writer is :func:`qpcontact.outputs.write_csv`.)
+(The tables' CSV writer is :func:`qpcontact.io.outputs.write_csv`.)
 """
 
 from __future__ import annotations

@@ -36,15 +36,15 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import add_output_arguments, positive_int, run_standalone
+from ..cli import add_output_arguments, positive_int, run_standalone
 from ..colony import Colony
 from ..colony.growth import growth_step
 from ..errors import InvalidArgumentError
 from ..geometry import capsule_footprint, evaluate_contacts
 from ..io import load_snapshot
-from ..outputs import describe_written, prepare_folder, write_text
+from ..io.outputs import describe_written, prepare_folder, write_text
 from ..simulation import Settings
-from ..simulation.simulate import step_function, step_mechanics
+from ..simulation.steps import step_function, step_mechanics
 from ..timestep import CellMechanics, cell_forces, cell_pressure, fit_parabola, radial_profile
 from ..timestep.mechanics import radial_distances
 from ..timestep.position import PositionStepResult

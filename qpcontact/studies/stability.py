@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import (
+from ..cli import (
     add_output_arguments,
     comma_list,
     non_negative_int,
@@ -69,8 +69,8 @@ from ..arguments import (
 )
 from ..ensembles import cluster
 from ..errors import InvalidArgumentError, QPContactError
-from ..outputs import describe_written, prepare_folder, write_text
-from ..outputs import write_csv as write_table
+from ..io.outputs import describe_written, prepare_folder, write_text
+from ..io.outputs import write_csv as write_table
 from ..resolve import metrics, resolve
 from ..solvers import DEFAULT_FORM, QP_FORMS, QP_FORMULATIONS, available_solvers, get_solver
 from . import harness

@@ -1,10 +1,10 @@
 """Mechanics from contact forces: the net force and torque on each cell, its virial stress and
-pressure, radial profiles of a colony, and growth that slows under pressure.
+pressure, radial profiles of a colony (growth that slows under pressure: :mod:`qpcontact.colony.pressure`).
 
 **Forces.** A contact ``k`` between cells ``a`` and ``b`` (``b = -1``: a static plane or wall)
 with unit normal ``n_k`` (from b to a) and normal force ``λ_k`` pushes a with ``λ_k n_k`` at
 its contact point (``offset_a``, relative to a's centre) and b with ``−λ_k n_k`` at
-``offset_b``. The forces are those of a step: :attr:`qpcontact.colony.PositionStepResult.contact_forces`
+``offset_b``. The forces are those of a step: :attr:`qpcontact.timestep.PositionStepResult.contact_forces`
 (the units in which the drive is a force). A plane counts as a contact of its cell.
 
 **Stress** (the Love–Weber virial of a particle): for cell ``i`` with contacts ``c``,
@@ -26,12 +26,6 @@ A cell with no loaded contact has zero stress. A contact force that points away 
 cell's centre at its contact point (``r·f > 0``: possible at the end of a rod lying across
 another at a slant) counts as tension and can make a cell's pressure negative (none of the 5,001
 cells of the grown colony of docs/mechanics.md).
-
-**Growth under pressure** (:func:`pressure_growth_rate`): ``r = r₀·max(0, 1 − p/p_s)``
-(``"linear"``: growth stops at the stall pressure ``p_s``) or ``r = r₀·exp(−p/p_s)``
-(``"exponential"``), with tension (``p < 0``) counted as no pressure, so that growth is never
-faster than ``r₀``: the two usual forms of growth inhibited by contact pressure in models of
-growing colonies and self-driven jamming.
 """
 
 from __future__ import annotations
@@ -42,14 +36,17 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..checks import flag, instance, number, real_array
+from .. import moved
+from ..checks import flag, instance, real_array
 from ..errors import InvalidArgumentError
 from ..geometry import Cells, Contacts, capsule_footprint, capsule_volume
 from ..geometry.cells import PLANAR_TOLERANCE
 from ..geometry.contacts import check_contacts
 
-#: The laws of :func:`pressure_growth_rate`.
-GROWTH_LAWS = ("linear", "exponential")
+
+def __getattr__(name: str) -> Any:
+    """The names that moved out of this module (deprecated; :mod:`qpcontact.moved`)."""
+    return moved.attribute(__name__, name, moved.NAMES[__name__])
 
 
 class Lineage(Protocol):
@@ -114,7 +111,7 @@ def cell_forces(cells: Cells, contacts: Contacts, forces: Any) -> tuple[np.ndarr
     return _per_cell(cells.n, cell, force), _per_cell(cells.n, cell, np.cross(offset, force))
 
 
-def is_planar(cells: Cells, contacts: Contacts) -> bool:
+def is_monolayer_scene(cells: Cells, contacts: Contacts) -> bool:
     """The cells are a monolayer in the xy-plane (:meth:`~qpcontact.Cells.is_monolayer`) and
     every contact normal lies in it (no substrate under them): the scene whose pressure is
     the 2D one."""
@@ -138,7 +135,7 @@ def cell_stress(cells: Cells, contacts: Contacts, forces: Any, *, planar: bool |
             in the units in which the drive is a force].
         planar: True: a monolayer, the stress is taken over each cell's footprint
             ``2ρl + πρ²`` (2D stress [force/length]); False: over its volume (3D stress
-            [force/length²]); None: :func:`is_planar`. Pass it explicitly in a run, so that the
+            [force/length²]); None: :func:`is_monolayer_scene`. Pass it explicitly in a run, so that the
             units do not change when a 3D colony happens to be flat.
 
     Returns:
@@ -154,7 +151,7 @@ def _stress(cells: Cells, contacts: Contacts, forces: Any, planar: bool | None) 
     """:func:`cell_stress`, and whether it is the 2D one (``planar``, detected if None)."""
     cell, offset, force = _loads(cells, contacts, forces)  # checks the arguments first
     planar = flag("planar", planar, allow_none=True)
-    planar = is_planar(cells, contacts) if planar is None else planar
+    planar = is_monolayer_scene(cells, contacts) if planar is None else planar
     virial = _per_cell(cells.n, cell, offset[:, :, None] * force[:, None, :])
     return virial / cell_sizes(cells, planar)[:, None, None], planar
 
@@ -175,7 +172,7 @@ def cell_pressure(cells: Cells, contacts: Contacts, forces: Any, *, planar: bool
     the cell's footprint ``2ρl + πρ²`` [force/length], i.e. ``−Σ_c (r_c·f_c)/(2 A_i)``.
 
     Args:
-        cells, contacts, forces, planar: as :func:`cell_stress` (None: :func:`is_planar`).
+        cells, contacts, forces, planar: as :func:`cell_stress` (None: :func:`is_monolayer_scene`).
 
     Raises:
         InvalidArgumentError: see :func:`cell_stress`.
@@ -238,64 +235,6 @@ class CellMechanics:
         known, pick = source >= 0, np.maximum(source, 0)
         return CellMechanics(np.where(known, self.pressure[pick], 0.0),
                              np.where(known[:, None, None], self.stress[pick], 0.0), self.planar)
-
-
-def pressure_growth_rate(base_rate: Any, pressure: Any, *, law: str = "linear", stall_pressure: float) -> np.ndarray:
-    """Growth rates slowed by pressure (module docstring).
-
-    Args:
-        base_rate: the rate without pressure, a number or (N,) [1/time].
-        pressure: (N,) cell pressures (:func:`cell_pressure`) in the units of ``stall_pressure``;
-            tension (``p < 0``) counts as 0.
-        law: ``"linear"``: ``r₀·max(0, 1 − p/p_s)``, growth stops at ``p_s``;
-            ``"exponential"``: ``r₀·exp(−p/p_s)``, growth slows by ``e`` at ``p_s``.
-        stall_pressure: ``p_s`` > 0, in the units of ``pressure`` (a run's: [force/µm] in 2D,
-            [force/µm²] in 3D; :class:`CellMechanics`).
-
-    Returns:
-        (N,) rates [1/time], ``0 ≤ r ≤ r₀``.
-
-    Raises:
-        InvalidArgumentError: an unknown law, a stall pressure that is not a finite number > 0,
-            rates or pressures that are not finite, negative rates, or shapes that do not match.
-    """
-    if law not in GROWTH_LAWS:
-        raise InvalidArgumentError(f"law: expected one of {', '.join(GROWTH_LAWS)}, got {law!r}")
-    stall_pressure = number("stall_pressure", stall_pressure, minimum=0.0, open_minimum=True)
-    base = real_array("base_rate", base_rate, InvalidArgumentError)
-    p = real_array("pressure", pressure, InvalidArgumentError)
-    if p.ndim != 1 or base.ndim > 1 or (base.ndim == 1 and base.shape != p.shape):
-        raise InvalidArgumentError(f"base_rate and pressure: expected a number or (N,) rates and (N,) pressures, got "
-                                   f"shapes {base.shape} and {p.shape}")
-    if not (np.all(np.isfinite(base)) and np.all(base >= 0) and np.all(np.isfinite(p))):
-        raise InvalidArgumentError("base_rate and pressure: rates must be finite and >= 0, pressures finite")
-    load = np.maximum(p, 0.0) / stall_pressure
-    factor = np.maximum(0.0, 1.0 - load) if law == "linear" else np.exp(-load)
-    return base * factor
-
-
-@dataclass(frozen=True)
-class PressureGrowth:
-    """Pressure-dependent growth in a colony run (:func:`qpcontact.colony.run_colony`): before
-    each step, every cell's rate is :func:`pressure_growth_rate` of its own rate (the colony's
-    ``rates``, which stay as they are: the slowed rates apply to that step only) and the
-    pressure of the step before.
-
-    Attributes:
-        law: ``"linear"`` or ``"exponential"`` (:func:`pressure_growth_rate`).
-        stall_pressure: ``p_s`` > 0 in the run's pressure units ([force/µm] in 2D, [force/µm²]
-            in 3D).
-    """
-
-    law: str
-    stall_pressure: float
-
-    def __post_init__(self) -> None:
-        pressure_growth_rate(np.zeros(0), np.zeros(0), law=self.law, stall_pressure=self.stall_pressure)  # checks
-
-    def rates(self, colony: Lineage, mechanics: CellMechanics) -> np.ndarray:
-        """The rates of ``colony``'s cells for the next step."""
-        return pressure_growth_rate(colony.rates, mechanics.pressure, law=self.law, stall_pressure=self.stall_pressure)
 
 
 @dataclass(frozen=True)

@@ -9,8 +9,7 @@ from scipy.spatial.transform import Rotation
 import qpcontact as qc
 from qpcontact.assembly.system import build_system
 from qpcontact.geometry.contacts import Contacts
-from qpcontact.geometry.motion import rotate
-from qpcontact.timestep import advance
+from qpcontact.geometry.motion import move, rotate
 
 
 def random_cell(rng):
@@ -94,9 +93,9 @@ def test_seed_closed_form_normal_equation_block_is_not_MtM():
 
 def package_point(cell, sigma, e, h):
     """The body point at time h as the package's own integrator moves it:
-    :func:`qpcontact.timestep.advance` (centre, axis by the exact rotation, length) and
+    the velocity step's :func:`qpcontact.geometry.motion.move` (centre, axis by the exact rotation, length) and
     :func:`qpcontact.geometry.motion.rotate` for the radial offset, which turns with the body."""
-    moved = advance(cell, h)
+    moved = move(cell, h)
     radial = rotate(e[None], cell.angular_velocities * h)[0]
     return moved.centers[0] + sigma * moved.lengths[0] * moved.axes[0] + cell.radii[0] * radial
 
@@ -105,7 +104,7 @@ def package_point(cell, sigma, e, h):
 @pytest.mark.parametrize("on_cap", [False, True])
 def test_row_matches_the_motion_of_the_package_integrator(seed, on_cap):
     """The contact row and the timestep integrator describe the same motion: the row predicts
-    the velocity of a body point as advance() moves it (central differences, O(h²))."""
+    the velocity of a body point as move() moves it (central differences, O(h²))."""
     rng = np.random.default_rng(100 + seed)
     cell = random_cell(rng)
     sigma, e = sample_point(rng, cell, on_cap)

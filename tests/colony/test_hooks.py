@@ -12,7 +12,8 @@ from qpcontact.cli import main
 from qpcontact.colony import StepControl, push
 from qpcontact.errors import ModelHookError
 from qpcontact.io.runs import RunFolder
-from qpcontact.simulation.simulate import Settings, run_colony
+from qpcontact.simulation.loop import run_colony
+from qpcontact.simulation.settings import Settings
 
 SETTINGS = Settings().updated({"cells": 10**6, "max_dt": 0.1, "max_steps": 30, "rate_noise": 0.0})
 

@@ -16,7 +16,7 @@ from qpcontact.colony import Colony
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry import Contacts, Plane, capsule_footprint, capsule_volume, substrate
 from qpcontact.timestep import CellMechanics, PositionSettings, position_step
-from qpcontact.timestep.mechanics import fit_parabola, is_planar, pressure_of, radial_profile
+from qpcontact.timestep.mechanics import fit_parabola, is_monolayer_scene, pressure_of, radial_profile
 
 RADIUS = 0.5
 
@@ -120,7 +120,7 @@ def test_the_stress_of_a_rod_growing_between_two_walls_matches_the_hand_computat
     assert qc.cell_pressure(out.cells, out.contacts, out.contact_forces, planar=False)[0] == pytest.approx(
         2 * g * reach / (3 * volume), rel=1e-5)
     # The rod is a monolayer with walls in its plane: detected as 2D (over the footprint).
-    assert is_planar(out.cells, out.contacts)
+    assert is_monolayer_scene(out.cells, out.contacts)
     assert qc.cell_pressure(out.cells, out.contacts, out.contact_forces)[0] == pytest.approx(
         2 * g * reach / (2 * footprint), rel=1e-5)
 
@@ -258,7 +258,7 @@ def test_pressure_growth_rate_linear_and_exponential():
     with pytest.raises(InvalidArgumentError, match="finite"):
         qc.pressure_growth_rate(-1.0, pressure, stall_pressure=1.0)
     with pytest.raises(InvalidArgumentError, match="law"):
-        qc.timestep.PressureGrowth("cubic", 1.0)
+        qc.colony.PressureGrowth("cubic", 1.0)
 
 
 def test_mechanics_carried_over_division_go_to_both_daughters():

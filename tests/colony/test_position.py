@@ -365,7 +365,7 @@ def test_end_positions_agree_with_a_tight_step_to_a_thousandth_of_a_diameter(dim
     one default step ends within 10⁻³ of a diameter (every cell's centre and tips) of the same
     step solved at tolerance 10⁻⁸ (``qpcontact bench-grown`` reports the same on the large states)."""
     from qpcontact.simulation import Settings, run_colony
-    from qpcontact.simulation.simulate import step_function
+    from qpcontact.simulation.steps import step_function
     from qpcontact.studies.grown import REFERENCE_TOLERANCE, end_difference
 
     settings = Settings().updated({"cells": n_cells, "dimensions": dimensions}, "test")
@@ -413,7 +413,8 @@ def test_resolve_on_a_grown_state_needs_a_margin_as_documented():
     """The position step leaves its contacts at a gap of up to ``aim``: resolve at margin 0 finds
     almost none of them, at the documented margin 0.05 µm nearly every touching pair."""
     import qpcontact as qc
-    from qpcontact.simulation.simulate import Settings, run_colony
+    from qpcontact.simulation.loop import run_colony
+    from qpcontact.simulation.settings import Settings
 
     cells = run_colony(Settings().updated({"cells": 60}), progress=False).colony.cells
     offset = cells.centers - cells.centers.mean(axis=0)

@@ -17,8 +17,10 @@ from qpcontact.cli import main
 from qpcontact.errors import OutputFolderError
 from qpcontact.io.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder, read_toml, write_toml
 from qpcontact.io.snapshots import load_snapshot
-from qpcontact.simulation import simulate
-from qpcontact.simulation.simulate import EXIT_SHORT, Settings, run_colony
+from qpcontact.simulation import loop
+from qpcontact.simulation.loop import run_colony
+from qpcontact.simulation.settings import Settings
+from qpcontact.simulation.simulate import EXIT_SHORT
 from tests.helpers import default_signals, gate_model, wait_for
 
 #: A 3D run with divisions (random axis turns and rates) in both halves, in about a second.
@@ -122,7 +124,7 @@ def test_ctrl_c_or_sigterm_stops_simulate_cleanly_and_resume_continues_it(tmp_pa
 
 def test_an_output_folder_that_cannot_be_written_fails_before_the_run(tmp_path, monkeypatch, capsys):
     """Before: the run went to the end and the final save_colony failed with a traceback."""
-    monkeypatch.setattr(simulate, "run_colony", lambda *a, **k: pytest.fail("the run started"))
+    monkeypatch.setattr(loop, "run_colony", lambda *a, **k: pytest.fail("the run started"))
     (tmp_path / "file").write_text("")
     assert main(["simulate", "--out", str(tmp_path / "file" / "run"), "--quiet"]) == 2
     err = capsys.readouterr().err
@@ -251,7 +253,7 @@ def test_a_bad_config_file_is_a_one_line_error(tmp_path, capsys, text, message):
 
 def test_a_config_files_known_keys_are_every_setting():
     """The config error's list of known keys left out keys it accepted."""
-    from qpcontact.described import known_names, settings_of
+    from qpcontact.schema import known_names, settings_of
 
     listing = known_names(Settings)
     for s in settings_of(Settings):
@@ -308,7 +310,7 @@ def test_a_run_with_pressure_growth_resumed_from_a_snapshot_equals_the_uninterru
     """The growth of each step depends on the pressure of the step before: the snapshots keep it,
     so a run resumed from one continues exactly (a run that forgot it would grow the first step
     after the resume unslowed)."""
-    from qpcontact.timestep import PressureGrowth
+    from qpcontact.colony import PressureGrowth
 
     settings = Settings().updated({"cells": 10**6, "max_steps": 40})
     growth = PressureGrowth("exponential", 5.0)

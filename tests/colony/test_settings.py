@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from qpcontact import cli
-from qpcontact.described import find_setting, settings_of
 from qpcontact.io.runs import read_toml
 from qpcontact.io.snapshots import load_snapshot, save_colony
+from qpcontact.schema import find_setting, settings_of
 from qpcontact.simulation import Settings, run_colony
 from qpcontact.simulation.settings import FORMER_NAMES
 from qpcontact.simulation.simulate import EXIT_SHORT
@@ -251,7 +251,7 @@ def test_pressure_growth_flags_slow_the_run_as_the_law_does_and_are_named_where_
     """--pressure-growth linear --stall-pressure 0.5 runs what run_colony(pressure_growth=
     PressureGrowth("linear", 0.5)) runs, bit for bit; config.toml, the snapshots and the last
     line say so; the same steps without it reach an earlier time (growth is not slowed)."""
-    from qpcontact.timestep import PressureGrowth
+    from qpcontact.colony import PressureGrowth
 
     common = ["--cells", "1000000", "--max-steps", "40", "--quiet"]
     slowed_out, free_out = tmp_path / "slowed", tmp_path / "free"

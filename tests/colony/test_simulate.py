@@ -6,8 +6,9 @@ import pytest
 import qpcontact as q
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.io.snapshots import load_colony
+from qpcontact.simulation import loop, simulate
 from qpcontact.simulation import settings as settings_module
-from qpcontact.simulation import simulate
+from qpcontact.simulation import steps as step_policy
 
 
 def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
@@ -41,7 +42,7 @@ def test_simulate_command_writes_snapshots_history_and_pictures(tmp_path):
 
 
 def test_simulate_settings_are_checked(change, message):
-    from qpcontact.simulation.simulate import Settings
+    from qpcontact.simulation.settings import Settings
 
     with pytest.raises(InvalidArgumentError, match=message):
         Settings().updated(change)
@@ -51,12 +52,13 @@ def test_a_default_run_takes_position_steps_and_keeps_their_tolerance(monkeypatc
     """The README's promise: no contact overlaps by more than 0.01 of a diameter at the end of any
     step of the default run (until issue 19 this test allowed 0.06, which the velocity step met),
     and the default run is the position-level step (every step one call of grow_position)."""
-    from qpcontact.simulation.simulate import Settings, run_colony
+    from qpcontact.simulation.loop import run_colony
+    from qpcontact.simulation.settings import Settings
 
     calls = []
-    real = simulate.grow_position
-    monkeypatch.setattr(simulate, "grow_position", lambda *a, **k: calls.append(1) or real(*a, **k))
-    monkeypatch.setattr(simulate, "grow", lambda *a, **k: pytest.fail("the velocity step ran"))
+    real = step_policy.grow_position
+    monkeypatch.setattr(step_policy, "grow_position", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(step_policy, "grow", lambda *a, **k: pytest.fail("the velocity step ran"))
     settings = Settings().updated({"cells": 150})
     run = run_colony(settings, progress=False)
     assert not run.error and run.colony.cells.n >= 150
@@ -127,7 +129,8 @@ def test_every_saved_snapshot_keeps_the_steps_overlap_tolerance(tmp_path, dimens
     first, inside the step that clears it."""
     from qpcontact.io.runs import RunFolder
     from qpcontact.io.snapshots import load_snapshot
-    from qpcontact.simulation.simulate import Settings, run_colony
+    from qpcontact.simulation.loop import run_colony
+    from qpcontact.simulation.settings import Settings
 
     settings = Settings().updated({"cells": n_cells, "dimensions": dimensions, "snapshot_every": 1})
     run = run_colony(settings, progress=False, folder=RunFolder.create(tmp_path / "run"))
@@ -151,8 +154,9 @@ def test_overlap_limit_retries_a_step_that_carries_a_cell_into_an_unseen_neighbo
     contact is not in the step's system): the full step ends with half a diameter of overlap;
     with ``overlap_limit`` the step is retried with half the step, which ends touching."""
     from qpcontact.colony.growth import Colony
-    from qpcontact.simulation.simulate import Settings, grow_with_retries
-    from qpcontact.timestep.step import largest_overlap
+    from qpcontact.geometry.overlap import largest_overlap
+    from qpcontact.simulation.settings import Settings
+    from qpcontact.simulation.steps import grow_with_retries
 
     cells = q.Cells(centers=[[0, 0, 0], [1.5, 0, 0]], axes=[0, 1, 0], lengths=2.0, radii=0.5, growth_inertia=np.inf)
     colony = Colony.founder(cells, 0.0)
@@ -179,8 +183,8 @@ def test_the_time_step_follows_the_expansion_of_a_colony_of_the_runs_dimensions(
         return real(colony, **kwargs)
 
     monkeypatch.setattr(settings_module, "expansion_time_step", spy)
-    settings = simulate.Settings().updated({"cells": 2, "dimensions": dimensions, "max_steps": 3, "step": "velocity"})
-    run = simulate.run_colony(settings, progress=False)
+    settings = settings_module.Settings().updated({"cells": 2, "dimensions": dimensions, "max_steps": 3, "step": "velocity"})
+    run = loop.run_colony(settings, progress=False)
     assert not run.error and passed == [dimensions] * run.steps
 
 
@@ -200,7 +204,8 @@ def test_a_step_that_starts_with_more_overlap_than_relaxation_clears_it_within_t
     step is taken again clearing it, so the state it ends in (and saves) keeps the tolerance; the
     plain position step would leave ~0.05."""
     from qpcontact.colony import Colony, grow_position
-    from qpcontact.simulation.simulate import Settings, position_step_function
+    from qpcontact.simulation.settings import Settings
+    from qpcontact.simulation.steps import position_step_function
     from qpcontact.timestep import PositionSettings
 
     cells = q.Cells([[0.0, 0.0, 0.0], [0.3, 0.88, 0.0]], [1, 0, 0], [2.0, 1.5], 0.5)
@@ -218,7 +223,8 @@ def bare_run(settings):
     """What a run was before it measured pressure: the founder, then per step division and the
     run's step function, nothing else (2D: no drive)."""
     from qpcontact.colony import divide
-    from qpcontact.simulation.simulate import founder, step_function
+    from qpcontact.simulation.loop import founder
+    from qpcontact.simulation.steps import step_function
 
     model = settings.model
     colony, rng, extra = founder(settings), np.random.default_rng(settings.run.seed), {}
@@ -236,8 +242,9 @@ def bare_run(settings):
 def test_a_run_without_pressure_growth_is_the_bare_loop_bit_for_bit(step):
     """Measuring pressure changes nothing of a trajectory; pressure growth whose factor is
     exactly 1 (a stall pressure of 1e300: 1 − p/1e300 rounds to 1) neither."""
-    from qpcontact.simulation.simulate import Settings, run_colony
-    from qpcontact.timestep import PressureGrowth
+    from qpcontact.colony import PressureGrowth
+    from qpcontact.simulation.loop import run_colony
+    from qpcontact.simulation.settings import Settings
 
     settings = Settings().updated({"cells": 40, "step": step, "max_steps": 60})
     reference = bare_run(settings)
@@ -255,10 +262,10 @@ def test_pressure_growth_slows_the_crowded_inside_and_keeps_the_colonys_own_rate
     """Linear pressure growth with a stall pressure below the pressures a 150-cell colony
     reaches: fewer cells after the same time, the slowest growth where the pressure is highest,
     and the colony's rates (the base rates that daughters draw around) are not the slowed ones."""
-    from qpcontact.colony import StepControl
+    from qpcontact.colony import PressureGrowth, StepControl, pressure_growth_rate
     from qpcontact.io.runs import RunFolder
-    from qpcontact.simulation.simulate import Settings, run_colony
-    from qpcontact.timestep import PressureGrowth, pressure_growth_rate
+    from qpcontact.simulation.loop import run_colony
+    from qpcontact.simulation.settings import Settings
 
     settings = Settings().updated({"cells": 10**6, "max_steps": 120})
     free = run_colony(settings, progress=False)
@@ -301,7 +308,9 @@ def test_the_history_has_the_mean_and_largest_pressure_and_pictures_colour_by_pr
     from matplotlib.figure import Figure
 
     from qpcontact.io.runs import RunFolder
-    from qpcontact.simulation.simulate import Settings, draw_pictures, run_colony
+    from qpcontact.simulation.loop import run_colony
+    from qpcontact.simulation.picture import draw_pictures
+    from qpcontact.simulation.settings import Settings
 
     folder = RunFolder.create(tmp_path / "run")
     settings = Settings().updated({"cells": 30})
@@ -358,21 +367,23 @@ def test_a_start_with_types_that_type_rates_has_no_rate_for_is_refused_up_front(
     from qpcontact.cli import main
     from qpcontact.io.snapshots import save_colony
 
-    colony = simulate.founder(simulate.Settings()).replace(cell_types=[2])
+    colony = loop.founder(settings_module.Settings()).replace(cell_types=[2])
     start = save_colony(tmp_path / "typed.npz", colony, 0)
     assert main(["simulate", "--start", str(start), "--type-rates", "0.5,0.25", "--out", str(tmp_path / "run"),
                  "--quiet"]) == 2
     assert "type_rates: gives 2 rates (types 0 to 1), but the colony has cells of type 2" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
     with pytest.raises(InvalidArgumentError, match="has cells of type 2"):
-        simulate.run_colony(simulate.Settings().updated({"type_rates": [0.5]}), start=colony, progress=False)
+        loop.run_colony(settings_module.Settings().updated({"type_rates": [0.5]}), start=colony, progress=False)
 
 
 def test_colony_png_can_be_coloured_by_cell_type(tmp_path, monkeypatch):
     from matplotlib.figure import Figure
 
     from qpcontact.io.runs import RunFolder
-    from qpcontact.simulation.simulate import Settings, draw_pictures, run_colony
+    from qpcontact.simulation.loop import run_colony
+    from qpcontact.simulation.picture import draw_pictures
+    from qpcontact.simulation.settings import Settings
 
     settings = Settings().updated({"cells": 6})
     run = run_colony(settings, progress=False, hook=lambda colony, step: colony.replace(cell_types=colony.ids % 3))
@@ -409,7 +420,7 @@ def test_a_target_that_cannot_be_reached_is_refused_and_a_short_run_says_so(tmp_
     assert main(["sweep", "--rate", "0", "--cells", "10", "--seeds", "1", "--out", str(tmp_path / "s"), "--quiet"]) == 2
     assert "run seed-1: cells: the target of 10 cells can never be reached" in capsys.readouterr().err
     with pytest.raises(InvalidArgumentError, match="never be reached"):
-        simulate.run_colony(simulate.Settings().updated({"rate": 0.0, "cells": 3}), progress=False)
+        loop.run_colony(settings_module.Settings().updated({"rate": 0.0, "cells": 3}), progress=False)
     # A model hook may set growth rates: then nothing is refused (here it sets none: the run ends short).
     hook = tmp_path / "model.py"
     hook.write_text("def hook(colony, step):\n    return None\n")
@@ -448,5 +459,5 @@ def test_a_failed_step_ends_the_run_saying_what_to_try(tmp_path, monkeypatch, ca
     assert "stalled" in last and "To try: smaller steps (--growth-per-step 0.025, or --max-halvings 5" in last
     assert "--position-max-iterations 60" in last and "--position-solver (now ipm: mprgp or clarabel)" in last
     assert last.endswith("continue with --resume")
-    settings = simulate.Settings().updated({"step": "velocity"})
-    assert "--velocity-tolerance (now 1e-06)" in simulate.flags_to_try(settings)
+    settings = settings_module.Settings().updated({"step": "velocity"})
+    assert "--velocity-tolerance (now 1e-06)" in step_policy.flags_to_try(settings)

@@ -6,8 +6,8 @@ import pytest
 import qpcontact as q
 from qpcontact.colony.growth import Colony, divide, grow
 from qpcontact.errors import InvalidArgumentError, InvalidCellsError, SolverFailedError
-from qpcontact.geometry.motion import rotate
-from qpcontact.timestep.step import advance, step
+from qpcontact.geometry.motion import move, rotate
+from qpcontact.timestep.step import step
 
 
 def rod_pair_end_to_end(gap=0.0):
@@ -26,17 +26,17 @@ def test_rotate_is_exact_and_keeps_unit_length():
 
 
 
-def test_advance_moves_turns_and_stretches():
+def test_move_moves_turns_and_stretches_with_the_cells_own_momenta():
     cells = q.Cells(centers=[[0, 0, 0]], axes=[[1, 0, 0]], lengths=2.0, radii=0.5, masses=2.0,
                     growth_inertia=4.0, momenta=[[2.0, 0, 0]], angular_momenta=[[0, 0, 0.3]], growth_momenta=[8.0])
     dt = 0.1
-    moved = advance(cells, dt)
+    moved = move(cells, dt)  # (the velocity step's move: the cells' own momenta)
     omega = cells.angular_velocities[0, 2]
     np.testing.assert_allclose(moved.centers[0], [0.1, 0, 0], atol=1e-15)  # v = p/m = 1
     np.testing.assert_allclose(moved.axes[0], [np.cos(omega * dt), np.sin(omega * dt), 0], atol=1e-15)
     assert moved.lengths[0] == pytest.approx(2.0 + 2.0 * dt)  # l̇ = g/G = 2
     with pytest.raises(InvalidArgumentError, match="too large"):
-        advance(cells.replace(growth_momenta=[-100.0]), dt)
+        move(cells.replace(growth_momenta=[-100.0]), dt)
 
 
 
@@ -155,18 +155,48 @@ def test_contacts_that_do_not_collide_before_the_solve_must_still_be_in_the_syst
 def test_a_runs_step_options_clear_an_overlap_that_steps_defaults_leave():
     """A new user's loop with step()'s defaults (no margin, no position correction) left an
     overlap of 0.067 of a diameter standing for 50 steps; the difference to qpcontact simulate is
-    said in step's docstring, and Settings().step_options() steps as simulate does."""
+    said in step's docstring, and the run's own settings object, VelocitySettings() (issue 35:
+    beside the step, as PositionSettings is beside position_step), steps as simulate does, and
+    so do Settings().step_options() (the keyword arguments of earlier versions)."""
+    from qpcontact.geometry.overlap import largest_overlap
     from qpcontact.simulation import Settings
-    from qpcontact.timestep.step import largest_overlap
 
     cells = q.Cells(centers=[[0, 0, 0], [0, 1.0 - 0.067, 0]], axes=[1, 0, 0], lengths=2.0, radii=0.5)
-    plain, run_like = cells, cells
+    plain, run_like, by_options = cells, cells, cells
     for _ in range(50):
         plain = step(plain, 0.02).cells
-        run_like = step(run_like, 0.02, **Settings().step_options()).cells
+        run_like = step(run_like, 0.02, settings=q.VelocitySettings(), planar=True).cells
+        by_options = step(by_options, 0.02, **Settings().step_options()).cells
     assert largest_overlap(plain) == pytest.approx(0.067)
     assert largest_overlap(run_like) < 1e-9
-    assert "Settings().step_options()" in step.__doc__ and "no position correction" in step.__doc__
+    np.testing.assert_array_equal(run_like.centers, by_options.centers)  # the same step, bit for bit
+    assert "settings=VelocitySettings()" in step.__doc__ and "no position correction" in step.__doc__
+    assert Settings().velocity == q.VelocitySettings()
+
+
+def test_step_takes_its_settings_or_the_keywords_of_earlier_versions_not_both():
+    """The single solve is step's default, with resolve's own solver, formulation, form and
+    tolerance (step no longer reads resolve's defaults at run time: SINGLE_SOLVE says them, and
+    this test holds them equal); settings and a keyword that names one of its fields together are
+    refused, naming the keyword."""
+    import inspect
+
+    from qpcontact.timestep.step import SINGLE_SOLVE, VelocitySettings
+
+    defaults = {k: p.default for k, p in inspect.signature(q.resolve).parameters.items()}
+    assert {k: SINGLE_SOLVE[k] for k in ("solver", "formulation", "form", "tolerance", "margin",
+                                        "position_correction")} == {k: defaults[k] for k in (
+        "solver", "formulation", "form", "tolerance", "margin", "position_correction")}
+    cells = q.Cells(centers=[[0, 0, 0], [0, 0.95, 0]], axes=[1, 0, 0], lengths=2.0, radii=0.5)
+    by_settings = step(cells, 0.02, settings=VelocitySettings.single_solve(margin=0.2, position_correction=0.5))
+    by_keywords = step(cells, 0.02, margin=0.2, position_correction=0.5)
+    np.testing.assert_array_equal(by_settings.cells.centers, by_keywords.cells.centers)
+    with pytest.raises(InvalidArgumentError, match="margin: given together with settings"):
+        step(cells, 0.02, settings=VelocitySettings(), margin=0.2)
+    with pytest.raises(InvalidArgumentError, match="settings: expected qpcontact.timestep.VelocitySettings"):
+        step(cells, 0.02, settings={"margin": 0.2})
+    with pytest.raises(InvalidArgumentError, match="dynamics: expected one of"):
+        step(cells, 0.02, dynamics="ballistic")
 
 
 @pytest.mark.parametrize("dt, closes", [(0.05, True), (0.2, False)])

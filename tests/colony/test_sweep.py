@@ -18,10 +18,12 @@ import numpy as np
 import pytest
 
 from qpcontact import cli
-from qpcontact.ensembles import cluster, sweep
+from qpcontact.ensembles import cluster, submit, sweep, tasks
+from qpcontact.ensembles import grid as grids
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.io.runs import HISTORY_FIELDS, TIMING_FIELDS, RunFolder
-from qpcontact.simulation.simulate import Settings, run_colony
+from qpcontact.simulation.loop import run_colony
+from qpcontact.simulation.settings import Settings
 from qpcontact.studies import harness
 from qpcontact.timestep import PositionSettings
 from tests.helpers import default_signals, gate_model, wait_for
@@ -39,7 +41,7 @@ def read_summary(out: Path) -> dict[str, dict[str, str]]:
 
 
 def attempts(out: Path, name: str) -> list[dict]:
-    return sweep.attempts_of(out / "runs" / name)
+    return tasks.attempts_of(out / "runs" / name)
 
 
 @pytest.fixture(scope="module")
@@ -55,16 +57,16 @@ def scheduler():
 # The grid, checked before anything starts
 # ------------------------------------------------------------------------------------------
 def test_the_grid_is_seeds_times_the_product_of_the_varied_lists_or_their_zip():
-    grid = sweep.Grid({"growth_inertia_ratio": [100.0, 1000.0], "position_overlap_tolerance": [0.01, 0.02]}, [1, 2])
-    runs = sweep.plan_runs(Settings().updated({"cells": 10}), grid)
+    grid = grids.Grid({"growth_inertia_ratio": [100.0, 1000.0], "position_overlap_tolerance": [0.01, 0.02]}, [1, 2])
+    runs = grids.plan_runs(Settings().updated({"cells": 10}), grid)
     assert len(runs) == 8 and len({r["name"] for r in runs}) == 8
     assert runs[0]["name"] == "growth_inertia_ratio-100__position_overlap_tolerance-0.01__seed-1"
     assert runs[0]["settings"]["run"]["cells"] == 10 and runs[-1]["settings"]["run"]["seed"] == 2
     assert runs[-1]["settings"]["position"]["overlap_tolerance"] == 0.02
     assert runs[-1]["varied"] == {"growth_inertia_ratio": 1000.0, "position_overlap_tolerance": 0.02, "seed": 2}
-    zipped = sweep.plan_runs(Settings(), sweep.Grid({"cells": [10, 20], "dimensions": [2, 3]}, [5], zip=True))
+    zipped = grids.plan_runs(Settings(), grids.Grid({"cells": [10, 20], "dimensions": [2, 3]}, [5], zip=True))
     assert [r["name"] for r in zipped] == ["cells-10__dimensions-2__seed-5", "cells-20__dimensions-3__seed-5"]
-    assert [r["name"] for r in sweep.plan_runs(Settings(), sweep.Grid({}, [3, 4]))] == ["seed-3", "seed-4"]
+    assert [r["name"] for r in grids.plan_runs(Settings(), grids.Grid({}, [3, 4]))] == ["seed-3", "seed-4"]
 
 
 def test_the_grid_from_a_configuration_file_with_flags_overriding_it(tmp_path):
@@ -164,10 +166,10 @@ def test_an_earlier_sweep_is_refused_unless_resumed_or_overwritten(tmp_path, cap
 
 
 def test_nematic_order():
-    assert sweep.nematic_order(np.array([[1.0, 0, 0]] * 5), 2) == pytest.approx(1.0)
-    assert sweep.nematic_order(np.array([[1.0, 0, 0], [0, 1.0, 0]]), 2) == pytest.approx(0.0, abs=1e-12)
-    assert sweep.nematic_order(np.eye(3), 3) == pytest.approx(0.0, abs=1e-12)
-    assert sweep.nematic_order(np.array([[0, 0, 1.0]] * 3), 3) == pytest.approx(1.0)
+    assert tasks.nematic_order(np.array([[1.0, 0, 0]] * 5), 2) == pytest.approx(1.0)
+    assert tasks.nematic_order(np.array([[1.0, 0, 0], [0, 1.0, 0]]), 2) == pytest.approx(0.0, abs=1e-12)
+    assert tasks.nematic_order(np.eye(3), 3) == pytest.approx(0.0, abs=1e-12)
+    assert tasks.nematic_order(np.array([[0, 0, 1.0]] * 3), 3) == pytest.approx(1.0)
 
 
 # ------------------------------------------------------------------------------------------
@@ -176,22 +178,22 @@ def test_nematic_order():
 def test_a_run_task_continues_a_cut_run_from_its_snapshot_exactly_and_is_done_once(tmp_path):
     settings = Settings().updated({"cells": 12, "seed": 3, "snapshot_every": 5})
     values = settings.to_tables()
-    whole = sweep.run_task("whole", values, str(tmp_path / "whole"))
+    whole = tasks.run_task("whole", values, str(tmp_path / "whole"))
     assert whole["status"] == "done" and whole["attempts"] == 1 and whole["cells"] >= 12
     # A run cut short: snapshots to step 15, history rows beyond it (a worker killed at step 18).
     cut = tmp_path / "cut"
     folder = RunFolder.create(cut)
     run_colony(settings.updated({"max_steps": 18}), progress=False, folder=folder)
     (cut / "snapshots" / "step_000018.npz").unlink()
-    outcome = sweep.run_task("cut", values, str(cut))
-    assert outcome["status"] == "done" and [a["from_step"] for a in sweep.attempts_of(cut)] == [15]
+    outcome = tasks.run_task("cut", values, str(cut))
+    assert outcome["status"] == "done" and [a["from_step"] for a in tasks.attempts_of(cut)] == [15]
     ours, theirs = RunFolder(cut).read_history(), RunFolder(tmp_path / "whole").read_history()
     for name in set(HISTORY_FIELDS) - set(TIMING_FIELDS):
         np.testing.assert_array_equal(ours[name], theirs[name], err_msg=name)
     assert {k: outcome[k] for k in ("cells", "steps", "largest_overlap", "order")} == \
         {k: whole[k] for k in ("cells", "steps", "largest_overlap", "order")}
-    assert sweep.run_task("cut", values, str(cut)) == json.loads((cut / sweep.RESULT_FILE).read_text())
-    assert len(sweep.attempts_of(cut)) == 1  # done: not started again
+    assert tasks.run_task("cut", values, str(cut)) == json.loads((cut / tasks.RESULT_FILE).read_text())
+    assert len(tasks.attempts_of(cut)) == 1  # done: not started again
 
 
 # ------------------------------------------------------------------------------------------
@@ -279,7 +281,7 @@ def test_ctrl_c_in_a_terminal_stops_the_sweep_in_seconds_and_tells_each_runs_sta
             process.wait()
     text = log.read_text()
     assert "Traceback" not in text and "KeyboardInterrupt" not in text, text
-    assert took < sweep.STOP_WAIT, text  # the runs answered the flag: nobody waited for dead workers
+    assert took < submit.STOP_WAIT, text  # the runs answered the flag: nobody waited for dead workers
     runs = {line.split(": ")[1]: line.split(": ", 2)[2] for line in text.splitlines() if line.startswith("  pending: ")}
     assert sorted(runs) == ["seed-1", "seed-2", "seed-3"], text
     started = [name for name in runs if attempts(out, name)]
@@ -293,7 +295,7 @@ def test_a_run_not_finished_is_said_to_be_started_or_not_from_its_folder(tmp_pat
     folder = tmp_path / "run"
     folder.mkdir()
     assert sweep.progress_of(folder) == "not started"
-    (folder / sweep.ATTEMPTS_FILE).write_text('{"from_step": 0}\n')
+    (folder / tasks.ATTEMPTS_FILE).write_text('{"from_step": 0}\n')
     assert sweep.progress_of(folder) == "started, cut short; no snapshot yet"
     (folder / "snapshots").mkdir()
     (folder / "snapshots" / "step_000010.npz").write_bytes(b"")
@@ -310,7 +312,7 @@ def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_pa
     names = ["seed-1", "seed-2", "seed-3"]
     gates = tmp_path / "gates"
     gates.mkdir()
-    gate = gate_model(gates, 8, stop_flag=out / sweep.STOP_FILE, skip_first=True)
+    gate = gate_model(gates, 8, stop_flag=out / tasks.STOP_FILE, skip_first=True)
     process = _sweep_process(["--cells", "150", "--seeds", "1,2,3", "--snapshot-every", "5", "--workers", "1",
                               "--hook", str(gate), "--out", str(out)], tmp_path / "first.log")
     try:
@@ -323,7 +325,7 @@ def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_pa
             process.kill()
             process.wait()
     assert "interrupted; continue with: qpcontact sweep --resume" in (tmp_path / "first.log").read_text()
-    done = [n for n in names if (out / "runs" / n / sweep.RESULT_FILE).exists()]
+    done = [n for n in names if (out / "runs" / n / tasks.RESULT_FILE).exists()]
 
     def reached(name: str) -> int:
         latest = RunFolder(out / "runs" / name).latest_snapshot()
@@ -333,7 +335,7 @@ def test_a_stopped_sweep_resumes_without_redoing_finished_runs(scheduler, tmp_pa
     assert len(done) == 1 and len(cut) == 1, {n: reached(n) for n in names}
     # the third: not started, or (a cancellation racing its start) stopped by the flag at once
     assert all(reached(n) <= 0 for n in names if n not in done + cut)
-    assert not (out / sweep.STOP_FILE).exists()  # removed once the local cluster is closed
+    assert not (out / tasks.STOP_FILE).exists()  # removed once the local cluster is closed
     assert sweep.main(["--resume", "--workers", "2", "--quiet", "--out", str(out)]) == 0
     summary = read_summary(out)
     assert all(row["status"] == "done" for row in summary.values())
@@ -367,7 +369,7 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
         scheduler_file = tmp_path / "scheduler.json"
         start("scheduler", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
               "--dashboard-address", ":0", "--scheduler-file", str(scheduler_file))
-        wait_for(lambda: scheduler_file.exists() and sweep.read_json(scheduler_file), "the scheduler", PATIENCE)
+        wait_for(lambda: scheduler_file.exists() and tasks.read_json(scheduler_file), "the scheduler", PATIENCE)
         workers = [start(f"worker{i}", "distributed.cli.dask_worker", "--scheduler-file", str(scheduler_file),
                          "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{i}") for i in (1, 2)]
         out = tmp_path / "sweep"
@@ -402,7 +404,7 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
         else:
             assert len(starts) == 1, (name, starts)
     # The continued run is the uninterrupted run.
-    whole = sweep.run_task("whole", Settings().updated({"cells": 150, "seed": int(victim.split("-")[1]),
+    whole = tasks.run_task("whole", Settings().updated({"cells": 150, "seed": int(victim.split("-")[1]),
                                                         "snapshot_every": 5}).to_tables(), str(tmp_path / "whole"))
     ours, theirs = RunFolder(out / "runs" / victim).read_history(), RunFolder(tmp_path / "whole").read_history()
     assert ours["max_overlap"] == theirs["max_overlap"] and ours["cells"] == theirs["cells"]
@@ -419,14 +421,14 @@ def test_a_run_folder_is_locked_while_its_task_runs_and_freed_when_it_dies(tmp_p
     folder = tmp_path / "run"
     gate = gate_model(tmp_path, 8)
     values = Settings().updated({"cells": 60, "seed": 2, "hook": str(gate), "snapshot_every": 5}).to_tables()
-    code = (f"from qpcontact.ensembles import sweep; sweep.run_task('r', {values!r}, {str(folder)!r})")
+    code = (f"from qpcontact.ensembles import tasks; tasks.run_task('r', {values!r}, {str(folder)!r})")
     first = subprocess.Popen([sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.DEVNULL,
                              stderr=subprocess.PIPE, text=True)
     try:
         wait_for(lambda: (tmp_path / "held").exists() or first.poll() is not None, "the task held at step 8",
                  PATIENCE)
         assert first.poll() is None, first.communicate()[1]
-        with open(folder / sweep.LOCK_FILE, "a") as fh:
+        with open(folder / tasks.LOCK_FILE, "a") as fh:
             with pytest.raises(BlockingIOError):  # held by the running task
                 fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
             first.kill()
@@ -437,9 +439,9 @@ def test_a_run_folder_is_locked_while_its_task_runs_and_freed_when_it_dies(tmp_p
         if first.poll() is None:
             first.kill()
             first.wait()
-    outcome = sweep.run_task("r", values, str(folder))
+    outcome = tasks.run_task("r", values, str(folder))
     assert outcome["status"] == "done" and outcome["attempts"] == 2
-    assert [a["from_step"] for a in sweep.attempts_of(folder)] == [0, 5]
+    assert [a["from_step"] for a in tasks.attempts_of(folder)] == [0, 5]
 
 
 def test_a_scheduler_that_does_not_answer_is_one_line(tmp_path, capsys, monkeypatch):

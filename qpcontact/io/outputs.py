@@ -14,7 +14,7 @@ Every command that writes files (``qpcontact simulate``, ``compare``, ``stabilit
 
 Tables go to CSV through :func:`write_csv` (one row per run, floats to fixed significant digits).
 
-Standard library only; importable from every wing (like :mod:`qpcontact.errors`).
+Standard library only; what the io wing, the run loop, ensembles and the studies write goes through it.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from collections.abc import Callable, Iterable, Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any
 
-from .errors import OutputFolderError
+from ..errors import OutputFolderError
 
 _UMASK = os.umask(0)
 os.umask(_UMASK)
