@@ -27,7 +27,7 @@ import numpy as np
 from ..colony.growth import Colony, daughters_share, divide
 from ..colony.hooks import Hook, apply_hook, load_hook
 from ..colony.pressure import PressureGrowth
-from ..errors import InvalidArgumentError, ModelHookError, SolverFailedError
+from ..errors import InvalidArgumentError, ModelHookError, SolverFailedError, TooManyContactsError
 from ..geometry import Cells, capsule_volume
 from ..io.runs import HISTORY_FIELDS, RunFolder
 from ..io.snapshots import Snapshot
@@ -284,4 +284,6 @@ def attempt_step(state: RunState, settings: Settings, interrupt: Interrupt, hook
         state.error, state.exception = f"{where}: contact solve failed, not applied: {exc}. {flags_to_try(settings)}", exc
     except InvalidArgumentError as exc:  # e.g. contacts compressed a cell to a negative length
         state.error, state.exception = f"{where}: step not applied: {exc}", exc
+    except TooManyContactsError as exc:  # at every halving of the step
+        state.error, state.exception = f"{where}: step not applied: {exc}. {flags_to_try(settings)}", exc
     return None

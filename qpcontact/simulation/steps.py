@@ -32,7 +32,7 @@ import numpy as np
 from ..colony.growth import Colony, grow, grow_position
 from ..colony.hooks import push
 from ..colony.pressure import PressureGrowth
-from ..errors import StepFailedError
+from ..errors import StepFailedError, TooManyContactsError
 from ..geometry import Cells
 from ..geometry.overlap import largest_overlap
 from ..timestep.mechanics import CellMechanics
@@ -128,15 +128,16 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray], com
     """The position-level step of a run (:func:`qpcontact.colony.grow_position`): the substrate
     in 3D, the planar unknowns in 2D, the contact impulses and the cells' motion of each step kept
     in ``extra`` as the next one's warm start and predictor (and so restored on resume). A step that
-    does not reach the overlap tolerance is retried with half the step, up to ``run.max_halvings``
-    times; the last failure is raised (:class:`~qpcontact.errors.StepFailedError`), never applied.
+    does not reach the overlap tolerance, or whose cells would move so far that the contact search
+    finds more candidate pairs than it allows (:class:`~qpcontact.errors.TooManyContactsError`), is
+    retried with half the step, up to ``run.max_halvings`` times; the last failure is raised, never
+    applied.
 
     The state a step ends in keeps the overlap tolerance unless overlap present at its start
     exceeded what ``relaxation`` clears in one step (a division's axis noise turning a daughter
     into a neighbour by more than 0.05 of a diameter, or a state from elsewhere): such a step is
     taken once more with the relaxation raised to that start overlap, so that it clears it
-    (turning still bounded by ``turn_limit``); if that fails, the first step stands and the
-    history shows its overlap."""
+    if that fails, the first step stands and the history shows its overlap."""
     position, halvings = settings.position, settings.run.max_halvings
     planar = settings.run.dimensions == 2
     planes = settings.planes()
@@ -148,7 +149,7 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray], com
             try:
                 grown, out = grow_position(colony, dt, drive=drive, planes=planes, planar=True if planar else None,
                                            settings=position, warm=warm, motion=motion, comm=comm)
-            except StepFailedError:
+            except (StepFailedError, TooManyContactsError):
                 if attempt == halvings:
                     raise
                 dt /= 2.0

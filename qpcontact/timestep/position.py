@@ -55,7 +55,6 @@ from typing import Any
 import numpy as np
 
 from ..assembly.system import ContactSystem, Turned, build_system
-from ..described import check_fields, documented, setting
 from ..errors import InvalidArgumentError, StepFailedError
 from ..geometry.cells import Cells
 from ..geometry.contacts import (
@@ -71,6 +70,7 @@ from ..geometry.motion import left_jacobian, move, rotate, turning_vectors
 from ..geometry.regions import ONE, Split
 from ..geometry.surfaces import Plane, evaluate_plane_contacts, plane_contacts
 from ..resolve.resolve import acceptance_failure
+from ..schema import check_fields, documented, setting
 from ..solvers import Problem, SolverSpec, get_solver, solve
 
 __all__ = ["CellMotion", "ContactImpulses", "PositionSettings", "PositionStepResult", "move", "position_step"]
@@ -80,8 +80,8 @@ __all__ = ["CellMotion", "ContactImpulses", "PositionSettings", "PositionStepRes
 @dataclass(frozen=True)
 class PositionSettings:
     """The parameters of :func:`position_step`; the ``[position]`` table of a run's settings
-    (:class:`qpcontact.colony.Settings`), flags ``--position-*``. Each field is described once,
-    with its unit, in its :func:`~qpcontact.described.setting` (listed below)."""
+    (:class:`qpcontact.simulation.Settings`), flags ``--position-*``. Each field is described once,
+    with its unit, in its :func:`~qpcontact.schema.setting` (listed below)."""
 
     overlap_tolerance: float = setting(
         0.01, unit="fraction of the pair's diameter ρ_a + ρ_b", above=0,
@@ -94,28 +94,34 @@ class PositionSettings:
              "more; in a 3D biofilm 0.75 made a step 1.3× dearer for nothing, docs/model-notes.md)")
     max_iterations: int = setting(30, unit="linearizations", at_least=1, help="cap on linearizations per step")
     turn_limit: float | None = setting(
-        0.2, unit="diameters of that cell", above=0,
-        help="largest displacement of a cell's tips by turning in one step; none: no bound (then any complementarity "
-             "solver can be used)")
-    trust: float = setting(0.3, unit="dimensionless", above=0, at_most=1,
-                           help="fraction of turn_limit the tips may move per iteration")
+        None, unit="diameters of that cell", above=0,
+        help="a cap on the displacement of a cell's tips by turning in one step; none (the default): no cap. A cap "
+             "changes the physics, not only the numerics: at 0.2, the default until 2026-12, a 2D colony of 5,000 "
+             "cells grew microdomains 1.6× and edge alignment 1.8× those of the converged colony "
+             "(docs/model-notes.md)")
+    trust: float | None = setting(
+        0.3, unit="diameters of that cell", above=0,
+        help="trust region of each linearization: a cell's tips move by turning at most this much from the last "
+             "linearization's answer; an answer that sits on it is followed by another linearization, so the trust "
+             "region sets the cost of a step, not its result; none: no trust region")
     relaxation: float = setting(
         0.05, unit="fraction of the pair's diameter", above=0,
         help="overlap present at the start of the step is removed by at most this much per step")
     aim: float = setting(
-        0.03, unit="fraction of the pair's diameter", at_least=0,
-        help="the linearizations aim at this gap beyond each target, so that the error of one linearization "
-             "(turning, and contacts sliding over the caps, are not linear) falls within the tolerance: on a "
-             "grown 3D biofilm of 5,000 cells one linearization per step where 0.02 needed two to four (the "
-             "first left 0.012-0.015 of a diameter), and 0.02 one per step in 2D where 0.01 needed two or "
-             "three (docs/model-notes.md); contacts then rest at up to this gap, as if the cells were this much "
-             "thicker")
+        0.0, unit="fraction of the pair's diameter", at_least=0,
+        help="the smallest gap the linearizations aim at beyond each contact's target (contacts rest at it, as if "
+             "the cells were this much thicker: 0.03 made a 2D colony 2.5 % less packed than 0.01, docs/model-notes.md); "
+             "where a linearization over-predicted a contact's separation, the next aims at that error instead")
+    trust_rounds: int = setting(
+        2, unit="linearizations", at_least=0,
+        help="linearizations a step takes beyond meeting the overlap tolerance while some cell's turn sits on its "
+             "trust region (each widening that cell's region)")
     allow_shrinking: bool = setting(
         False, unit="", help="contacts may shorten a cell (off: they can stop its growth but not reverse it)")
     solver: str = setting(
         "ipm", unit="",
         help="the QP solver of each linearization; it must take bounds (ipm, mprgp, or a qpsolvers backend in the "
-             "primal form) unless turn_limit is none and allow_shrinking is on")
+             "primal form) unless turn_limit and trust are none and allow_shrinking is on")
     tolerance: float = setting(
         1e-4, unit="dimensionless, scaled", above=0, below=1,
         help="its tolerance, in the scaled units of qpcontact.assembly.system (impulses relative to the largest, "
@@ -129,7 +135,7 @@ class PositionSettings:
     @property
     def bounded(self) -> bool:
         """The step bounds the unknowns (turning or shrinking)."""
-        return self.turn_limit is not None or not self.allow_shrinking
+        return self.turn_limit is not None or self.trust is not None or not self.allow_shrinking
 
 
 @dataclass(frozen=True)
@@ -410,33 +416,40 @@ def _start(cells: Cells, planes: Sequence[Plane], planar: bool, span: int,
 # One linearization: the QP of the step's contacts at the moved positions
 # ---------------------------------------------------------------------------------------------
 def _bounds(system: ContactSystem, cells: Cells, drive: np.ndarray, impulses: np.ndarray, dt: float,
-            settings: PositionSettings) -> tuple[np.ndarray, np.ndarray]:
-    """Bounds on the scaled unknowns ỹ: turning (total and per iteration) and shrinking."""
+            settings: PositionSettings, radius: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bounds on the scaled unknowns ỹ: turning (each cell's trust region of ``radius``
+    diameters around the impulses so far, and a cap on the step's turn where one is set) and
+    shrinking; ``(lower, upper, cap)``, with ``cap`` the cap of each column (inf: none)."""
     n = system.shape[1]
-    lower, upper = np.full(n, -np.inf), np.full(n, np.inf)
-    # ỹ of a column is sqrt(w)·x·σ_B/σ_b; its turning angle is dt·w·x = ỹ·unit⁻¹.
-    unit = system.operator_scale / (dt * np.sqrt(system.column_inverse_mass) * system.velocity_scale)
+    lower, upper, cap = np.full(n, -np.inf), np.full(n, np.inf), np.full(n, np.inf)
     cell, slot = system.column_cell, system.column_slot
-    if settings.turn_limit is not None:
-        turning = np.flatnonzero((slot == 4) | (slot == 5))
+    turning = np.flatnonzero((slot == 4) | (slot == 5))
+    if turning.size and (radius is not None or settings.turn_limit is not None):
+        # ỹ of a column is sqrt(w)·x·σ_B/σ_b; its turning angle is dt·w·x = ỹ·unit⁻¹, and a turn
+        # by one radian moves the tips by l/2 + ρ, i.e. by (l/2 + ρ)/(2ρ) diameters.
+        unit = system.operator_scale / (dt * np.sqrt(system.column_inverse_mass[turning]) * system.velocity_scale)
         c = cell[turning]
-        angle = settings.turn_limit * 2.0 * cells.radii[c] / (cells.lengths[c] / 2 + cells.radii[c])
-        cap = angle * unit[turning]
-        now = system.from_impulses(impulses)[turning]
-        lower[turning] = np.maximum(-cap, now - settings.trust * cap)
-        upper[turning] = np.minimum(cap, now + settings.trust * cap)
+        per_diameter = 2.0 * cells.radii[c] / (cells.lengths[c] / 2 + cells.radii[c]) * unit
+        if radius is not None:
+            now, reach = system.from_impulses(impulses)[turning], radius[c] * per_diameter
+            lower[turning], upper[turning] = now - reach, now + reach
+        if settings.turn_limit is not None:
+            cap[turning] = settings.turn_limit * per_diameter
+            lower[turning] = np.maximum(lower[turning], -cap[turning])
+            upper[turning] = np.minimum(upper[turning], cap[turning])
     if not settings.allow_shrinking:
         growth = np.flatnonzero(slot == 6)
         # l̇ = (g₀ + x_g)/G ≥ 0  ⇔  x_g ≥ −g₀  ⇔  ỹ ≥ −g₀·sqrt(w)·σ_B/σ_b
         lower[growth] = np.minimum(-drive[cell[growth], 6] * np.sqrt(system.column_inverse_mass[growth])
                                    * system.operator_scale / system.velocity_scale, upper[growth])
-    return lower, upper
+    return lower, upper, cap
 
 
-def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray, diameter: np.ndarray,
-               dt: float, drive: np.ndarray, impulses: np.ndarray, planar: bool,
-               settings: PositionSettings) -> tuple[ContactSystem, Problem] | None:
-    """The QP of one linearization (module docstring), or None when no contact asks for a push.
+def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray, aim: np.ndarray,
+               dt: float, drive: np.ndarray, impulses: np.ndarray, planar: bool, settings: PositionSettings,
+               radius: np.ndarray | None) -> tuple[ContactSystem, Problem, np.ndarray] | None:
+    """The QP of one linearization (module docstring) and its turning caps (:func:`_bounds`), or
+    None when no contact asks for a push.
 
     The unknowns are the impulses of the whole step in the cells' frame at the start of the step
     (its axes, its masses and inertia, as :func:`move` uses them), and each row is the exact
@@ -446,8 +459,8 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
     until 2026-12, made the linearizations converge only linearly: 3–6 per step)."""
     turned = Turned(axes=now.axes, jacobian=left_jacobian(turning_vectors(cells, dt, drive + impulses)))
     # The rows first (the right-hand side needs their product with the impulses so far), then
-    # d_k + dt·(J W (x_new − x))_k ≥ target_k + aim  ⇔  (J W x_new)_k ≥ (target_k + aim − d_k)/dt + (J W x)_k
-    b = (target + settings.aim * diameter - contacts.separation) / dt
+    # d_k + dt·(J W (x_new − x))_k ≥ target_k + aim_k  ⇔  (J W x_new)_k ≥ (target_k + aim_k − d_k)/dt + (J W x)_k
+    b = (target + aim - contacts.separation) / dt
     if not np.any(impulses):  # the first linearization: nothing to add
         if not np.any(b > 0):
             return None
@@ -458,19 +471,61 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
         if not np.any(b > 0):
             return None
         system = system.with_rhs(b)
-    lower, upper = _bounds(system, cells, drive, impulses, dt, settings) if settings.bounded else (None, None)
-    return system, Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper)
+    if not settings.bounded:
+        return system, Problem(system.matrix, system.rhs, system.column_inverse_mass), np.full(system.shape[1], np.inf)
+    lower, upper, cap = _bounds(system, cells, drive, impulses, dt, settings, radius)
+    return system, Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper), cap
 
 
-def _turn_limited(system: ContactSystem, problem: Problem, y: np.ndarray) -> int:
-    """Cells whose turning sits on a bound in the answer ``y``."""
+def _aims(progress: _Progress, contacts: Contacts, diameter: np.ndarray, settings: PositionSettings) -> np.ndarray:
+    """(K,) the gap each contact's linearization aims at beyond its target [length]: ``aim``
+    diameters, or as much as the last linearization over-predicted that contact's separation
+    (its error, up to :data:`MAX_AIM` diameters), whichever is larger. A contact rests at its
+    aim: a gap kept everywhere (0.03 of a diameter until 2026-12) made the cells that much
+    thicker, and a 2D colony 2.5 % less packed than at 0.01 (docs/model-notes.md); an aim where
+    the linearization erred (a cell turning fast) lasts as long as the error."""
+    aim = settings.aim * diameter
+    if progress.predicted is None or len(contacts) == 0:
+        return aim
+    keys, separation = progress.predicted
+    where = np.minimum(np.searchsorted(keys, progress.found.keys), max(keys.size - 1, 0))
+    known = keys[where] == progress.found.keys if keys.size else np.zeros(len(contacts), dtype=bool)
+    error = np.where(known, separation[where] - contacts.separation, 0.0)
+    return np.maximum(aim, np.minimum(error, MAX_AIM * diameter))
+
+
+def _turn_limited(system: ContactSystem, problem: Problem, cap: np.ndarray, y: np.ndarray) -> tuple[int, np.ndarray]:
+    """Cells whose turning sits on a bound in the answer ``y``: how many on any bound, and which
+    on their trust region (a bound that is not the step's ``cap``): those would have turned
+    further."""
     if problem.lower is None or problem.upper is None:
-        return 0
+        return 0, np.zeros(0, dtype=np.intp)
     turning = np.flatnonzero((system.column_slot == 4) | (system.column_slot == 5))
-    lower, upper = problem.lower[turning], problem.upper[turning]
+    lower, upper, cap = problem.lower[turning], problem.upper[turning], cap[turning]
     span = np.maximum(upper - lower, 1e-300)
-    at_bound = np.minimum(y[turning] - lower, upper - y[turning]) <= 1e-3 * span
-    return int(np.unique(system.column_cell[turning[at_bound]]).size)
+    at_lower, at_upper = y[turning] - lower <= 1e-3 * span, upper - y[turning] <= 1e-3 * span
+    finite = np.isfinite(span)
+    trusting = ((at_lower & (lower > -cap)) | (at_upper & (upper < cap))) & finite
+    cells_at = system.column_cell[turning]
+    return int(np.unique(cells_at[(at_lower | at_upper) & finite]).size), np.unique(cells_at[trusting])
+
+
+def _adapt_trust(progress: _Progress, before: np.ndarray, trusting: np.ndarray, settings: PositionSettings) -> None:
+    """Each cell's trust region after a solve that moved the impulses from ``before``: halved
+    for a cell whose turn went back against its last one (the linearization overshot: an SQP
+    iterate can swing a cell between two turns across a cap's contacts), doubled for a cell that
+    sat on it and kept its direction (its turn is longer than one linearization, and the last one
+    held); ``progress.trusting`` counts the cells still on it that could turn by more than the
+    overlap tolerance."""
+    if progress.radius is None:
+        return
+    change = progress.impulses[:, 3:6] - before[:, 3:6]
+    back = np.einsum("ij,ij->i", change, progress.turned) < 0
+    progress.radius[back] *= 0.5
+    ahead = trusting[~back[trusting]]
+    progress.radius[ahead] = np.minimum(2.0 * progress.radius[ahead], MAX_TRUST_GROWTH * (settings.trust or 0.0))
+    progress.turned = change
+    progress.trusting = int(np.count_nonzero(progress.radius[trusting] > settings.overlap_tolerance))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -480,6 +535,11 @@ def _turn_limited(system: ContactSystem, problem: Problem, y: np.ndarray) -> int
 #: more than before it) is backtracked half way, at most :data:`MAX_BACKTRACKS` times a step.
 BACKTRACK_OVERLAP = 0.5
 MAX_BACKTRACKS = 6
+#: A cell's trust region widens, linearization after linearization, to at most this many times
+#: ``PositionSettings.trust``.
+MAX_TRUST_GROWTH = 8.0
+#: The largest gap a contact's linearization aims at for the error of the last one [diameters].
+MAX_AIM = 0.1
 
 
 @dataclass
@@ -495,6 +555,12 @@ class _Progress:
     last: ContactImpulses = field(default_factory=ContactImpulses.empty)  # the last solve's, keyed by ids
     solver_iterations: int = 0
     turn_limited: int = 0
+    trusting: int = 0  # cells whose turn sat on the trust region in the last solve (and could go further)
+    radius: np.ndarray | None = None  # (N,) each cell's trust region [diameters]
+    # each contact's separation as the last linearization predicted it, by key: (keys, separation [length])
+    predicted: tuple[np.ndarray, np.ndarray] | None = None
+    trust_rounds: int = 0  # linearizations taken at feasible positions for cells on their trust region
+    turned: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (N, 3) the change of each cell's angular impulse in the last solve
 
 
 def search_margin(settings: PositionSettings, planar: bool) -> float:
@@ -566,6 +632,7 @@ def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known:
             and progress.backtracks < MAX_BACKTRACKS and iteration < settings.max_iterations):
         progress.impulses = progress.previous + 0.5 * (progress.impulses - progress.previous)
         progress.backtracks += 1
+        progress.predicted = None  # it predicted the full update
         progress.relaxation = 0.5
         overlaps.pop()
         return True
@@ -601,15 +668,26 @@ def _first_pairs(cells: Cells, now: Cells, predicted: Cells | None, reach: float
     pairs of the cells at the start, each cell's reach widened by how far its axis moves to the
     first linearization's positions ``now`` (the free motion) and to ``predicted``. The start's
     overlaps and the first linearization's contacts are then found among them (a broad phase is
-    2/3 of a detection; three were made at 10⁴ cells, 2026-12-04)."""
+    2/3 of a detection; three were made at 10⁴ cells, 2026-12-04).
+
+    Where the step moves many cells further than the search's reach (a large step of a fast
+    colony: the edge of a 2D colony of 5,000 cells moves microns in a step of 0.2 growth), the
+    widened reach would take in every neighbour of a moving region (2.4·10⁶ candidate pairs,
+    ``TooManyContactsError``, 2026-12-04): each configuration is then searched on its own and the
+    pairs put together, which bounds them by those of a packing."""
     slack = _tip_displacement(cells, now)
     if predicted is not None:
         slack = np.maximum(slack, _tip_displacement(cells, predicted))
-    return split.candidate_pairs(cells, reach, slack)
+    if slack.size == 0 or float(np.quantile(slack, 0.99)) <= reach:
+        return split.candidate_pairs(cells, reach, slack)
+    pairs = [split.candidate_pairs(c, reach) for c in (cells, now, predicted) if c is not None]
+    n = np.int64(max(cells.n, 1))
+    key = np.unique(np.concatenate([p[:, 0].astype(np.int64) * n + p[:, 1] for p in pairs]))
+    return np.column_stack([key // n, key % n]).astype(np.intp)
 
 
-def _solve(progress: _Progress, system: ContactSystem, problem: Problem, spec: SolverSpec, form: str,
-           settings: PositionSettings, ids: np.ndarray, times: dict[str, float], comm: Any = None) -> str:
+def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np.ndarray, separation: np.ndarray,
+           dt: float, spec: SolverSpec, form: str, settings: PositionSettings, ids: np.ndarray, times: dict[str, float], comm: Any = None) -> str:
     """Solve one linearization's QP and take its answer into ``progress``; why not, if it was
     not taken. An answer is taken only when its solver stands by it and it passes the acceptance
     checks of every answer (resolve's, with the bounds): a stalled answer within the acceptance
@@ -628,9 +706,12 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, spec: S
         return f"{out.status} {out.error or ''} {refused}".strip()
     lam = system.to_contact_impulses(out.lam) if out.lam is not None else np.zeros(problem.matrix.shape[0])
     progress.last = ContactImpulses(key_a, key_b, progress.found.kind.copy(), lam)
-    progress.turn_limited = _turn_limited(system, problem, out.y)
+    progress.turn_limited, trusting = _turn_limited(system, problem, cap, out.y)
     progress.previous = progress.impulses
     progress.impulses = progress.impulses + progress.relaxation * (system.to_impulses(out.y) - progress.impulses)
+    _adapt_trust(progress, progress.previous, trusting, settings)
+    moved = system.velocity_changes(progress.impulses) - system.velocity_changes(progress.previous)
+    progress.predicted = (progress.found.keys, separation + dt * moved)
     return ""
 
 
@@ -727,7 +808,8 @@ def position_step(
     times["detect"] += time.perf_counter() - t0
     empty = np.zeros(0, dtype=np.intp)
     progress = _Progress(impulses=np.zeros((n, 7)), found=_Tracked(empty, empty, empty, empty.astype(np.int64)),
-                         last=ContactImpulses.empty() if warm is None else warm)
+                         last=ContactImpulses.empty() if warm is None else warm, turned=np.zeros((n, 3)),
+                         radius=None if settings.trust is None else np.full(n, settings.trust))
     converged, message, iteration, excess = False, "", 0, 0.0
     for iteration in range(settings.max_iterations + 1):
         now = move(cells, dt, drive + progress.impulses)
@@ -744,20 +826,26 @@ def position_step(
         excess = float(np.max((target - contacts.separation) / diameter, initial=0.0))
         # The free motion itself may be within the tolerance (nothing pushes): nothing to solve
         # (and a solve would be ill-posed: its right-hand side, the scale of the problem, is ~0).
+        # A cell whose turn the trust region stopped would have turned further: not done yet.
         if excess <= settings.overlap_tolerance:
-            converged = True
-            break
+            if progress.trusting == 0 or progress.trust_rounds >= settings.trust_rounds:
+                converged = True
+                break
+            progress.trust_rounds += 1
         if iteration == settings.max_iterations:
             message = (f"largest overlap beyond its target {excess:.3g} of a diameter after {iteration} "
-                       f"linearizations (tolerance {settings.overlap_tolerance:g})")
+                       f"linearizations (tolerance {settings.overlap_tolerance:g})" if excess > settings.overlap_tolerance
+                       else f"{progress.trusting} cells still turning at the trust region's edge after {iteration} "
+                       f"linearizations (trust {settings.trust:g} diameters)")
             break
         t0 = time.perf_counter()
-        linear = _linearize(cells, now, contacts, target, diameter, dt, drive, progress.impulses, planar, settings)
+        linear = _linearize(cells, now, contacts, target, _aims(progress, contacts, diameter, settings), dt, drive,
+                            progress.impulses, planar, settings, progress.radius)
         times["assemble"] += time.perf_counter() - t0
         if linear is None:  # nothing asks for a push: the free motion is the answer
-            progress.impulses, progress.last = np.zeros((n, 7)), ContactImpulses.empty()
+            progress.impulses, progress.last, progress.trusting = np.zeros((n, 7)), ContactImpulses.empty(), 0
             continue
-        message = _solve(progress, *linear, spec, form, settings, ids, times, comm)
+        message = _solve(progress, *linear, contacts.separation, dt, spec, form, settings, ids, times, comm)
         if message:
             message = f"{settings.solver} failed at linearization {iteration}: {message}"
             break
