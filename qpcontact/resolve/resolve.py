@@ -354,9 +354,9 @@ def resolve(
             at a tenth of the tolerance (:func:`solve_system`), otherwise it is not accepted.
         margin: contacts closer than this also count [length]. The default counts only contacts
             that touch: on a state that :func:`qpcontact.position_step` (``qpcontact
-            simulate``) left, whose contacts rest at a gap of up to ``aim`` (0.02 of a diameter),
-            it finds almost none (one contact on a grown colony of 3,084 cells); pass
-            ``margin=0.05`` µm or more there (README, "margin on a grown state").
+            simulate``) left, whose contacts rest touching to within the solver's accuracy (some
+            a hair apart), it misses those; pass ``margin=0.05`` µm or more there
+            (docs/solvers.md).
         position_correction: β in ``b = −u + β·max(0, −d)/dt`` (0 = off); needs ``dt``.
         dt: the time step [time], for position correction.
         contacts: precomputed contacts (e.g. cell–cell plus cell–plane); found from ``cells`` if

@@ -100,7 +100,7 @@ class PositionSettings:
              "cells grew microdomains 1.6× and edge alignment 1.8× those of the converged colony "
              "(docs/model-notes.md)")
     trust: float | None = setting(
-        0.3, unit="diameters of that cell", above=0,
+        1.0, unit="diameters of that cell", above=0,
         help="trust region of each linearization: a cell's tips move by turning at most this much from the last "
              "linearization's answer; an answer that sits on it is followed by another linearization, so the trust "
              "region sets the cost of a step, not its result; none: no trust region")
