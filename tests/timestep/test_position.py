@@ -383,8 +383,8 @@ def test_end_positions_agree_with_a_tight_step_to_a_thousandth_of_a_diameter(dim
     assert end_difference(default.colony, tight.colony) <= 1e-3
 
 
-def test_a_deep_starting_overlap_is_relaxed_by_relaxation_per_step_as_the_readme_says():
-    """README: the 0.01 bound is for overlap a step makes; one the cells start with is removed by
+def test_a_deep_starting_overlap_is_relaxed_by_relaxation_per_step_as_the_docs_say():
+    """docs/usage.md (the README's words until issue 35): the 0.01 bound is for overlap a step makes; one the cells start with is removed by
     ``relaxation`` + ``aim`` (0.05 + 0.03 of a diameter) per step, so a deep start takes steps
     to clear (0.3 deep: 0.22, 0.14, 0.06, 0)."""
     import re
@@ -392,7 +392,7 @@ def test_a_deep_starting_overlap_is_relaxed_by_relaxation_per_step_as_the_readme
 
     import qpcontact as qc
 
-    readme = " ".join((Path(__file__).resolve().parents[2] / "README.md").read_text().split())
+    readme = " ".join((Path(__file__).resolve().parents[2] / "docs" / "usage.md").read_text().split())
     assert re.search(r"removes only `relaxation` \+ `aim`, 0\.05 \+ 0\.03 of a diameter, of an overlap it starts "
                      r"with, so that no cell is thrown \(0\.3 deep: 0\.22, 0\.14, 0\.06, 0 after each step\)",
                      readme)
