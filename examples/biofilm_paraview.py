@@ -18,7 +18,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from qpcontact.io import RunFolder
+import qpcontact as qc
+from qpcontact.io import RunFolder, paraview
 from qpcontact.io.plots import save_colony_picture
 from qpcontact.simulation import Settings, run_colony
 
@@ -30,6 +31,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("biofilm-out"), help="output folder (default: ./biofilm-out)")
     parser.add_argument("--overwrite", action="store_true", help="replace an earlier run in --out")
     args = parser.parse_args(argv)
+    try:
+        paraview.check_installed()
+    except qc.NotInstalledError as exc:  # one line naming what to install, no traceback
+        print(f"biofilm_paraview: {exc}", file=sys.stderr)
+        return 2
 
     settings = Settings().updated({"cells": args.cells, "dimensions": 3, "snapshot_every": args.every, "vtk": True})
     folder = RunFolder.create(args.out, overwrite=args.overwrite, vtk=True)  # checked before the run

@@ -34,6 +34,7 @@ from .colony import (
 from .errors import (
     InvalidArgumentError,
     InvalidCellsError,
+    NotInstalledError,
     PullingImpulseWarning,
     QPContactError,
     SolverFailedError,
@@ -65,7 +66,7 @@ __version__ = "0.1.0"
 __all__ = [
     "FORMS", "FORMULATIONS", "Agreement", "CellMotion", "Cells", "Colony", "ContactImpulses", "PositionSettings",
     "PositionStepResult", "StepFailedError", "VelocitySettings", "grow_position", "growth_time_step", "position_step", "ContactSystem", "Contacts", "InvalidArgumentError", "PullingImpulseWarning",
-    "InvalidCellsError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
+    "InvalidCellsError", "NotInstalledError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
     "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
     "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
     "colony_frame", "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",

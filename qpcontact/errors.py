@@ -35,7 +35,13 @@ class UnknownSolverError(QPContactError, ValueError):
     """No solver of that name is registered (:func:`qpcontact.solvers.get_solver`)."""
 
 
-class SolverNotInstalledError(QPContactError, ImportError):
+class NotInstalledError(QPContactError, ImportError):
+    """An optional part is asked for whose package is not installed (PETSc, pandas, Dask, meshio,
+    ...). The message is one line that names what to install (the extra of ``pip install``, or
+    ``scripts/install-mpi``); the commands and the examples print it and exit with status 2."""
+
+
+class SolverNotInstalledError(NotInstalledError):
     """The solver is registered (e.g. a known qpsolvers backend), but its Python package is not
     installed."""
 

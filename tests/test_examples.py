@@ -31,9 +31,42 @@ def test_every_example_is_tested():
 
 
 def test_own_loop_clears_the_overlap(capsys):
+    """The user's own loop with the position-level step (issue 35: it used the velocity step while
+    the README recommends position_step): the start's overlap of 0.05 is cleared, and no step
+    ends above the overlap tolerance."""
     assert run_example("own_loop") == 0
-    final = [line for line in capsys.readouterr().out.splitlines() if line.startswith("final largest overlap")]
-    assert len(final) == 1 and float(final[0].split()[3]) < 1e-6
+    lines = capsys.readouterr().out.splitlines()
+    overlaps = [float(line.split("|")[1]) for line in lines if "|" in line and line.split("|")[0].strip().isdigit()]
+    assert overlaps[0] == pytest.approx(0.05) and max(overlaps[1:]) <= PositionSettings().overlap_tolerance + 1e-12
+    final = [line for line in lines if line.startswith("final largest overlap")]
+    assert len(final) == 1 and float(final[0].split()[3]) <= PositionSettings().overlap_tolerance
+    assert "qc.position_step(" in (EXAMPLES / "own_loop.py").read_text()
+
+
+MISSING = """
+import runpy, sys
+sys.modules[sys.argv[1]] = None  # import of it raises ImportError, as where it is not installed
+sys.argv = [sys.argv[2], *sys.argv[3:]]
+runpy.run_path(sys.argv[0], run_name="__main__")
+"""
+
+
+@pytest.mark.parametrize(("example", "missing", "argv", "says"), [
+    ("mpi_loop", "petsc4py", [], "scripts/install-mpi"),
+    ("biofilm_paraview", "meshio", ["--out", "{tmp}"], "pip install 'qpcontact[vtk]'"),
+])
+def test_an_example_without_its_optional_part_says_what_to_install_in_one_line(tmp_path, example, missing, argv,
+                                                                                says):
+    """Issue 35: examples/mpi_loop.py without PETSc ended in a ModuleNotFoundError's traceback
+    (exit 1); now one line naming what to install, exit status 2, as every command does."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", MISSING, missing, str(EXAMPLES / f"{example}.py"),
+                           *(a.format(tmp=tmp_path / "out") for a in argv)], capture_output=True, text=True,
+                          cwd=ROOT, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1 and says in done.stderr and "Traceback" not in done.stderr
 
 
 def test_a_foreign_state_with_overlaps_of_0_15_is_cleared_without_spinning(capsys):

@@ -81,17 +81,47 @@ def _code_lines(function: ast.FunctionDef) -> int:
     return body[-1].end_lineno - body[0].lineno + 1 if body else 0
 
 
-def test_no_function_of_the_run_loop_is_over_sixty_lines():
-    """The run loop reads as named phases, as position_step does (run_colony was 93 lines)."""
-    long = []
-    for path in sorted((PACKAGE / "simulation").glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.FunctionDef) and _code_lines(node) > 60:
-                long.append(f"{path.relative_to(ROOT)}: {node.name} ({_code_lines(node)} lines)")
+#: Modules of the package that may still break the size rules below, each with why, to be
+#: removed from here when it is fixed.
+KNOWN_TOO_LONG = {
+    # The lead rewrites the position step (issue 32): position_step under 60 lines and the module
+    # under 700 are part of that rewrite; delete this entry with it.
+    "qpcontact/timestep/position.py": "issue 32",
+}
+
+
+def _long_functions(path: Path) -> list[str]:
+    return [f"{path.relative_to(ROOT)}: {node.name} ({_code_lines(node)} lines)"
+            for node in ast.walk(ast.parse(path.read_text()))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and _code_lines(node) > 60]
+
+
+def test_no_function_outside_the_studies_is_over_sixty_lines_and_no_module_over_seven_hundred():
+    """Issue 35: every wing reads as named phases, as the run loop does (run_colony was 93 lines;
+    resolve 155, mprgp 134, select_contacts 111, divide 99, build_system 98 lines with their
+    docstrings). The studies are scripts of measurements and are left out of the function rule."""
+    long, large = [], []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        name = str(path.relative_to(ROOT))
+        if name in KNOWN_TOO_LONG:
+            continue
+        if "studies" not in path.parts:
+            long += _long_functions(path)
+        lines = len(path.read_text().splitlines())
+        if lines > 700:
+            large.append(f"{name} ({lines} lines)")
     assert not long, long
+    assert not large, large
     run_colony = next(node for node in ast.walk(ast.parse((PACKAGE / "simulation" / "loop.py").read_text()))
                       if isinstance(node, ast.FunctionDef) and node.name == "run_colony")
     assert 10 < _code_lines(run_colony) <= 60  # (the measure counts the code of a real function)
+    assert all((ROOT / known).exists() for known in KNOWN_TOO_LONG), "a known exception that no longer exists"
+
+
+def test_the_top_level_holds_at_most_five_modules_besides_the_package_and_the_command():
+    top = sorted(p.name for p in PACKAGE.glob("*.py") if p.name not in ("__init__.py", "__main__.py"))
+    assert len(top) <= 5, top
+    assert {p.name for p in PACKAGE.iterdir() if p.is_dir() and (p / "__init__.py").exists()} <= set(WINGS)
 
 
 def test_the_layout_rule_is_checked_on_the_real_imports():
@@ -211,21 +241,43 @@ def test_public_api_of_the_readme_and_the_wings():
 
 
 def test_readme_examples_run():
-    """Both of the README's examples: the position-level step in a loop (growth pushes the third
-    cell away; no overlap beyond the tolerance; each cell's pressure from the contact forces), then
-    one contact solve."""
+    """The README's example, one contact solve per step in your own loop: the position-level step
+    (growth pushes the third cell away; no overlap beyond the tolerance; each cell's pressure from
+    the contact forces). (Its single solve with qc.resolve moved to docs/usage.md: below.)"""
     blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), re.S)
+    assert len(blocks) == 1 and "qc.position_step(" in blocks[0]
     namespace: dict = {}
     exec(compile(blocks[0], "README.md", "exec"), namespace)
     out, cells = namespace["out"], namespace["cells"]
     assert out.converged and out.max_overlap <= 0.01 and out.contact_forces.max() > 0
     assert cells.centers[2, 0] > 2.0 + 0.1  # pushed along x by the two growing cells
     assert np.all(qc.cell_pressure(cells, out.contacts, out.contact_forces) > 0)
-    namespace = {}
-    exec(compile(blocks[1], "README.md", "exec"), namespace)
+
+
+def test_the_usage_pages_single_solve_runs():
+    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / "usage.md").read_text(), re.S)
+    namespace: dict = {}
+    exec(compile(next(b for b in blocks if "qc.resolve(" in b), "usage.md", "exec"), namespace)
     result = namespace["result"]
     assert result.converged and len(result.contacts) == 1
     assert np.allclose(result.impulses[0, :3], [0.0, 0.5, 0.0], atol=1e-6)
+
+
+def test_the_front_page_is_short_and_has_what_a_newcomer_needs():
+    """Issue 35: at most 150 lines; the two set-up commands as CI runs them; an example each for
+    growing a colony, continuing a CellModeller run and a solve in your own loop; one table of
+    the commands; at most one line of speed numbers (they are in docs/performance.md)."""
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 150
+    assert 'pip install -e ".[all]" && qpcontact demo' in text and "\npython -m pytest -q " in text
+    for heading in ("## Grow a colony", "## Continue a CellModeller run", "## One contact solve in your own loop",
+                    "## Commands"):
+        assert heading in text, heading
+    assert "qpcontact import-cellmodeller" in text and "qpcontact simulate --start" in text
+    table = [line for line in text.splitlines() if line.startswith("| `qpcontact ")]
+    assert {line.split("`")[1].split()[1] for line in table} == set(cli.COMMANDS)
+    speed = [line for line in text.splitlines() if re.search(r"\d\s*(s|min|minutes|×)\b", line)]
+    assert len(speed) <= 1, speed
 
 
 DOCUMENTS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -466,3 +518,100 @@ def test_the_api_reference_builds_from_the_docstrings(tmp_path):
                  "qpcontact/timestep/position.html", "qpcontact/colony/hooks.html", "qpcontact/resolve/resolve.html", "qpcontact/solvers/registry.html"):
         assert (tmp_path / page).stat().st_size > 1000, page
     assert "load_snapshot" in (tmp_path / "qpcontact" / "io" / "snapshots.html").read_text()
+
+
+# ------------------------------------------------------------------------------------------
+# Docs that match the code (issue 35)
+# ------------------------------------------------------------------------------------------
+def _moved_paths() -> tuple[set[str], set[str]]:
+    """(old modules, old names as full dotted paths) of :mod:`qpcontact.moved`'s tables."""
+    from qpcontact import moved
+
+    return set(moved.MODULES), {f"{module}.{name}" for module, names in moved.NAMES.items() for name in names}
+
+
+def _moved_paths_named(text: str) -> set[str]:
+    """The old paths of moved modules and names a text names: dotted, or a moved module's file."""
+    modules, names = _moved_paths()
+    found = {old for old in modules | names if re.search(rf"(?<![\w.]){re.escape(old)}(?!\w)", text)}
+    found |= {old for old in modules if re.search(rf"(?<![\w/]){re.escape(old.replace('.', '/'))}\.py\b", text)}
+    return found
+
+
+def _moved_imports(path: Path) -> set[str]:
+    """The old paths a module of the package imports (relative imports too)."""
+    modules, names = _moved_paths()
+    return {module for _, module in _imports(path) if module in modules or module in names
+            or module.rsplit(".", 1)[0] in modules}
+
+
+def _help_texts() -> str:
+    """Every command's --help, and the command's own."""
+    texts = [cli.build_parser().format_help()]
+    for name in cli.COMMANDS:
+        texts.append(cli.command_parser(cli.build_parser(name), name).format_help())
+    return "\n".join(texts)
+
+
+def test_no_moved_path_is_named_in_the_package_its_help_texts_or_the_documents():
+    """Issue 35: over 40 docstring, help and doc lines named paths that had moved (the --step help
+    of simulate among them). The old paths work until moved.REMOVED_IN, for users' code; the
+    package, its help and its documents name the new homes only. (timestep/position.py, the lead's
+    rewrite of issue 32, is left out until it lands: KNOWN_TOO_LONG.)"""
+    stale = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        name = str(path.relative_to(ROOT))
+        if path.name == "moved.py" or name in KNOWN_TOO_LONG:
+            continue
+        stale += [f"{name}: {old}" for old in sorted(_moved_paths_named(path.read_text()) | _moved_imports(path))]
+    stale += [f"--help: {old}" for old in sorted(_moved_paths_named(_help_texts()))]
+    for document in [*DOCUMENTS, ROOT / "docs" / "api.sh", *sorted((ROOT / "examples").glob("*.py"))]:
+        stale += [f"{document.relative_to(ROOT)}: {old}" for old in sorted(_moved_paths_named(document.read_text()))]
+    assert not stale, stale
+
+
+def test_the_moved_path_check_finds_them():
+    text = ("see :func:`~qpcontact.colony.run_colony`, qpcontact/arguments.py, qpcontact.simulation.simulate.step_function "
+            "and `qpcontact.timestep.advance`; not qpcontact.simulation.steps.step_function or qpcontact/cli.py")
+    assert _moved_paths_named(text) == {"qpcontact.colony.run_colony", "qpcontact.arguments",
+                                        "qpcontact.simulation.simulate.step_function", "qpcontact.timestep.advance"}
+    from qpcontact import moved
+
+    assert moved.REMOVED_IN and all(new.startswith("qpcontact.") for table in moved.NAMES.values()
+                                    for new in table.values())
+    assert "qpcontact.described" in _moved_imports(PACKAGE / "timestep" / "position.py") or \
+        "timestep/position.py" not in KNOWN_TOO_LONG  # (the check reads relative imports)
+
+
+@pytest.mark.parametrize("document", ["README.md", "docs/architecture.md"])
+def test_every_module_path_the_front_page_and_the_architecture_name_exists(document):
+    """Every dotted ``qpcontact.…`` path in the text (not only in code spans) is a module, or a
+    name of one, where the document says it is, at its new home (no old path: the check above)."""
+    missing = []
+    for dotted in sorted(set(re.findall(r"(?<![\w.])qpcontact(?:\.\w+)+", (ROOT / document).read_text()))):
+        module, rest = dotted, []
+        while module.count(".") and not (ROOT / (module.replace(".", "/") + ".py")).exists() \
+                and not (ROOT / module.replace(".", "/") / "__init__.py").exists():
+            module, last = module.rsplit(".", 1)
+            rest.insert(0, last)
+        obj = __import__(module, fromlist=["_"])
+        for part in rest:
+            if not hasattr(obj, part):
+                missing.append(dotted)
+                break
+            obj = getattr(obj, part)
+    assert not missing, missing
+
+
+def test_the_tests_are_laid_out_like_the_wings():
+    """tests/<wing>/ holds the tests of that wing (each imports it); tests/mpi/ those that launch
+    MPI processes; the top level those of the package as a whole and of the top-level modules."""
+    tests = ROOT / "tests"
+    folders = {p.name for p in tests.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    assert folders <= {*WINGS, "mpi"}, folders - {*WINGS, "mpi"}
+    strays = []
+    for folder in sorted(folders - {"mpi"}):
+        for path in sorted((tests / folder).glob("test_*.py")):
+            if not any(_wing_of(module) == folder for _, module in _imports(path)):
+                strays.append(str(path.relative_to(ROOT)))
+    assert not strays, f"test modules that import nothing of their folder's wing: {strays}"

@@ -236,44 +236,9 @@ def build_system(
         raise InvalidArgumentError("planar=True, but some contact normal or axis leaves the xy-plane")
     planar = bool(planar and reduce)
 
-    sides = [(contacts.cell_a, 1.0, "a"), (contacts.cell_b, -1.0, "b")]
-    # Which cells get columns, and which of their seven slots.
-    if reduce:
-        # Sorted cells in some contact (a bincount is O(N); np.unique sorts 2K indices).
-        moving_b = contacts.cell_b[contacts.cell_b >= 0]
-        involved = np.flatnonzero(np.bincount(np.concatenate([contacts.cell_a, moving_b]), minlength=cells.n))
-        involved = involved[np.isfinite(cells.masses[involved])]
-    else:
-        involved = np.arange(cells.n)
-    used = np.ones((involved.size, 7), dtype=bool)
-    if reduce:
-        used[:, 3] = False  # spin about the own axis never changes a normal velocity
-        rod = cells.lengths[involved] > 0
-        used[:, 4] &= rod
-        used[:, 5] &= rod
-        used[:, 6] = cells.inverse_growth_inertia[involved] > 0
-        if planar:
-            used[:, 2] = False  # tz
-            used[:, 4] = False  # roll1 lies in the plane; roll2 = -z is kept
-    column_of = np.full((cells.n, 7), -1, dtype=np.intp)
-    column_of[involved] = np.where(used, np.cumsum(used).reshape(used.shape) - 1, -1)
-    n_cols = int(used.sum())
-
+    column_of = _columns(cells, contacts, reduce, planar)
     inverse_mass = slot_inverse_mass(cells, np.arange(cells.n))
-    sqrt_w = np.sqrt(inverse_mass)
-    rows, cols, vals = [], [], []
-    for cell, sign, side in sides:
-        valid = cell >= 0
-        jac = contact_jacobian(contacts if valid.all() else contacts.subset(valid), cells, side, turned) * sign
-        c = cell[valid]
-        col = column_of[c]
-        entry = jac * sqrt_w[c]
-        keep = col >= 0
-        rows.append(np.broadcast_to(np.flatnonzero(valid)[:, None], col.shape)[keep])
-        cols.append(col[keep])
-        vals.append(entry[keep])
-    rows_a, cols_a, vals_a = (np.concatenate(x) for x in (rows, cols, vals))
-    raw = sp.csr_matrix((vals_a, (rows_a, cols_a)), shape=(k, n_cols))
+    raw = _raw_matrix(cells, contacts, column_of, np.sqrt(inverse_mass), turned)
     diag = np.asarray(raw.multiply(raw).sum(axis=1)).ravel()
     if not np.all(diag > 0):
         bad = int(np.flatnonzero(~(diag > 0))[0])
@@ -303,3 +268,47 @@ def build_system(
         planar=planar,
         contacts=contacts,
     )
+
+
+def _columns(cells: Cells, contacts: Contacts, reduce: bool, planar: bool) -> np.ndarray:
+    """(N, 7) the column of each cell's slot in the system, -1 where it has none: which cells get
+    columns (with ``reduce``, those in some contact that can move), and which of their seven
+    slots (not the spin about the own axis, nor what the scene cannot use)."""
+    if reduce:
+        # Sorted cells in some contact (a bincount is O(N); np.unique sorts 2K indices).
+        moving_b = contacts.cell_b[contacts.cell_b >= 0]
+        involved = np.flatnonzero(np.bincount(np.concatenate([contacts.cell_a, moving_b]), minlength=cells.n))
+        involved = involved[np.isfinite(cells.masses[involved])]
+    else:
+        involved = np.arange(cells.n)
+    used = np.ones((involved.size, 7), dtype=bool)
+    if reduce:
+        used[:, 3] = False  # spin about the own axis never changes a normal velocity
+        rod = cells.lengths[involved] > 0
+        used[:, 4] &= rod
+        used[:, 5] &= rod
+        used[:, 6] = cells.inverse_growth_inertia[involved] > 0
+        if planar:
+            used[:, 2] = False  # tz
+            used[:, 4] = False  # roll1 lies in the plane; roll2 = -z is kept
+    column_of = np.full((cells.n, 7), -1, dtype=np.intp)
+    column_of[involved] = np.where(used, np.cumsum(used).reshape(used.shape) - 1, -1)
+    return column_of
+
+
+def _raw_matrix(cells: Cells, contacts: Contacts, column_of: np.ndarray, sqrt_w: np.ndarray,
+                turned: Turned | None) -> sp.csr_matrix:
+    """(K, columns) ``J W^{1/2}``, unscaled: each contact's Jacobian rows of its two sides."""
+    rows, cols, vals = [], [], []
+    for cell, sign, side in [(contacts.cell_a, 1.0, "a"), (contacts.cell_b, -1.0, "b")]:
+        valid = cell >= 0
+        jac = contact_jacobian(contacts if valid.all() else contacts.subset(valid), cells, side, turned) * sign
+        c = cell[valid]
+        col = column_of[c]
+        entry = jac * sqrt_w[c]
+        keep = col >= 0
+        rows.append(np.broadcast_to(np.flatnonzero(valid)[:, None], col.shape)[keep])
+        cols.append(col[keep])
+        vals.append(entry[keep])
+    rows_a, cols_a, vals_a = (np.concatenate(x) for x in (rows, cols, vals))
+    return sp.csr_matrix((vals_a, (rows_a, cols_a)), shape=(len(contacts), int((column_of >= 0).sum())))

@@ -31,7 +31,7 @@ row, and with per-type growth rates (``type_rates``) a newborn's mean rate is he
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -262,14 +262,7 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         InvalidArgumentError: bad arguments; a dividing cell whose type has no rate in
             ``type_rates``.
     """
-    if np.ndim(division_length) == 0:
-        division_length = number("division_length", division_length, minimum=0.0, open_minimum=True)
-    else:
-        division_length = real_array("division_length", division_length, InvalidArgumentError)
-        if division_length.shape != (colony.cells.n,) or not np.all(np.isfinite(division_length) & (division_length > 0)):
-            raise InvalidArgumentError(f"division_length: expected a number > 0 or {colony.cells.n} finite numbers > 0 "
-                                       f"(one per cell), got shape {division_length.shape}")
-    check_division_length(division_length, colony.cells.radii)
+    division_length = _division_lengths(colony, division_length)
     axis_noise = number("axis_noise", axis_noise, minimum=0.0)
     rate_noise = number("rate_noise", rate_noise, minimum=0.0)
     base_rate = number("base_rate", base_rate, minimum=0.0, allow_none=True)
@@ -284,19 +277,8 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
     if type_rates is not None and mother_types.max() >= type_rates.size:
         raise InvalidArgumentError(f"type_rates: gives {type_rates.size} types (0 to {type_rates.size - 1}), but a "
                                    f"dividing cell has type {int(mother_types.max())}")
-    radii, lengths, axes = cells.radii[dividing], cells.lengths[dividing], cells.axes[dividing]
-    daughter_length = lengths / 2 - radii  # > 0: lengths ≥ division_length > 2ρ (checked above)
-    owed = colony.owed[dividing] / 2 + radii / 3.0
-    shift = (daughter_length / 2 + radii)[:, None] * axes
     m = dividing.size
-    both_axes = np.concatenate([axes, axes])
-    if planar:
-        turns = np.zeros((2 * m, 3))
-        turns[:, 2] = rng.normal(0.0, axis_noise, 2 * m)
-    else:
-        turns = rng.normal(0.0, axis_noise, (2 * m, 3))
-        turns -= np.einsum("ij,ij->i", turns, both_axes)[:, None] * both_axes  # a spin about â turns nothing
-    new_axes = rotate(both_axes, turns)
+    owed = colony.owed[dividing] / 2 + cells.radii[dividing] / 3.0
 
     def split(mother_values: np.ndarray, first: np.ndarray, second: np.ndarray) -> np.ndarray:
         """Daughter 1 takes the mother's place, daughter 2 is appended."""
@@ -304,17 +286,7 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         out[dividing] = first
         return np.concatenate([out, second])
 
-    halved: dict[str, Any] = {}  # masses, growth inertias and momenta: each daughter takes half
-    for name in ("masses", "growth_inertia", "momenta", "angular_momenta", "growth_momenta"):
-        half = getattr(cells, name)[dividing] / 2
-        halved[name] = split(getattr(cells, name), half, half)
-    daughters = Cells(
-        centers=split(cells.centers, cells.centers[dividing] - shift, cells.centers[dividing] + shift),
-        axes=split(cells.axes, new_axes[:m], new_axes[m:]),
-        lengths=split(cells.lengths, daughter_length, daughter_length),
-        radii=split(cells.radii, radii, radii),
-        **halved,
-    )
+    daughters = _daughter_cells(cells, dividing, split, _daughter_axes(cells.axes[dividing], rng, axis_noise, planar))
     if type_rates is not None:
         mean_rate = type_rates[mother_types]
     else:
@@ -332,6 +304,57 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         next_id=colony.next_id + 2 * m,
         cell_types=split(colony.cell_types, mother_types, mother_types),
         cell_data={name: split(value, value[dividing], value[dividing]) for name, value in colony.cell_data.items()},
+    )
+
+
+def _division_lengths(colony: Colony, division_length: Any) -> float | np.ndarray:
+    """The division length checked: a number > 0, or one finite number > 0 per cell, each above
+    its cell's ``2ρ`` (:func:`check_division_length`)."""
+    if np.ndim(division_length) == 0:
+        division_length = number("division_length", division_length, minimum=0.0, open_minimum=True)
+    else:
+        division_length = real_array("division_length", division_length, InvalidArgumentError)
+        if division_length.shape != (colony.cells.n,) or not np.all(np.isfinite(division_length) & (division_length > 0)):
+            raise InvalidArgumentError(f"division_length: expected a number > 0 or {colony.cells.n} finite numbers > 0 "
+                                       f"(one per cell), got shape {division_length.shape}")
+    check_division_length(division_length, colony.cells.radii)
+    return division_length
+
+
+def _daughter_axes(axes: np.ndarray, rng: np.random.Generator, axis_noise: float, planar: bool) -> np.ndarray:
+    """(2M, 3) the axes of the daughters of mothers with ``axes`` (M, 3): the mother's, each
+    turned by the noise (about z only in a monolayer; never a spin about the axis)."""
+    m = axes.shape[0]
+    both_axes = np.concatenate([axes, axes])
+    if planar:
+        turns = np.zeros((2 * m, 3))
+        turns[:, 2] = rng.normal(0.0, axis_noise, 2 * m)
+    else:
+        turns = rng.normal(0.0, axis_noise, (2 * m, 3))
+        turns -= np.einsum("ij,ij->i", turns, both_axes)[:, None] * both_axes  # a spin about â turns nothing
+    return rotate(both_axes, turns)
+
+
+def _daughter_cells(cells: Cells, dividing: np.ndarray, split: Callable[..., np.ndarray],
+                    new_axes: np.ndarray) -> Cells:
+    """The cells after the ``dividing`` cells split: each daughter half her mother's length less
+    a radius, centred half that length plus a radius off the mother's centre along the axis, with
+    half her mass, inertia and momenta (``split`` puts daughter 1 in the mother's place and
+    appends daughter 2)."""
+    m = dividing.size
+    radii, lengths, axes = cells.radii[dividing], cells.lengths[dividing], cells.axes[dividing]
+    daughter_length = lengths / 2 - radii  # > 0: lengths ≥ division_length > 2ρ (checked)
+    shift = (daughter_length / 2 + radii)[:, None] * axes
+    halved: dict[str, Any] = {}  # masses, growth inertias and momenta: each daughter takes half
+    for name in ("masses", "growth_inertia", "momenta", "angular_momenta", "growth_momenta"):
+        half = getattr(cells, name)[dividing] / 2
+        halved[name] = split(getattr(cells, name), half, half)
+    return Cells(
+        centers=split(cells.centers, cells.centers[dividing] - shift, cells.centers[dividing] + shift),
+        axes=split(cells.axes, new_axes[:m], new_axes[m:]),
+        lengths=split(cells.lengths, daughter_length, daughter_length),
+        radii=split(cells.radii, radii, radii),
+        **halved,
     )
 
 

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from ..cli import positive_int
-from ..errors import InvalidArgumentError
+from ..errors import InvalidArgumentError, NotInstalledError
 
 #: How to install Dask for qpcontact.
 INSTALL_HINT = "pip install 'qpcontact[sweep]'"
@@ -47,12 +47,12 @@ def require_distributed() -> Any:
     """The ``distributed`` module.
 
     Raises:
-        InvalidArgumentError: Dask is not installed (naming the extra).
+        NotInstalledError: Dask is not installed (naming the extra).
     """
     try:
         import distributed
     except ImportError:
-        raise InvalidArgumentError(f"this needs Dask (dask.distributed): {INSTALL_HINT}") from None
+        raise NotInstalledError(f"this needs Dask (dask.distributed): {INSTALL_HINT}") from None
     return distributed
 
 
@@ -86,7 +86,7 @@ def open_client(scheduler: str | None = None, workers: int | None = None) -> Ite
     The client (and the local cluster) are closed when the block ends.
 
     Raises:
-        InvalidArgumentError: Dask is missing, or the scheduler does not answer (one line).
+        NotInstalledError: Dask is missing; InvalidArgumentError: the scheduler does not answer (one line each).
     """
     distributed = require_distributed()
     import dask

@@ -18,7 +18,7 @@ from .tasks import EVENT_TOPIC, STOP_FILE, attempts_of, run_task
 if TYPE_CHECKING:
     from .sweep import Sweep
 
-__all__ = ["STOP_WAIT", "execute", "stop", "with_unsubscribe"]
+__all__ = ["STOP_WAIT", "execute", "record", "stop", "with_unsubscribe"]
 
 #: Seconds a stopping sweep waits for its running runs to save their state.
 STOP_WAIT = 30.0
@@ -59,19 +59,9 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
         for future in finished:
             run = pending.pop(future)
             running.discard(run["name"])
-            if future.status == "finished" and future.result()["status"] == "stopped":
-                run.update(status="pending", error=future.result()["error"])
-                continue
-            if future.status == "finished":
-                sweep.record(run, future.result())
-            elif future.status == "error":
-                exc = future.exception()
-                sweep.record(run, {"status": "failed", "error": f"{type(exc).__name__}: {exc}"})
-            else:  # cancelled: the scheduler lost it
-                run.update(status="pending", error=f"task {future.status} (the scheduler lost it); resume the sweep")
-                continue
-            sweep.save()
-            bar.update()
+            if record(sweep, run, future):
+                sweep.save()
+                bar.update()
         return bool(finished)
 
     try:
@@ -92,6 +82,23 @@ def execute(sweep: Sweep, client: Any, runs: list[dict[str, Any]], *, progress: 
         bar.close()
         with_unsubscribe(client)
         sweep.save()
+    return True
+
+
+def record(sweep: Sweep, run: dict[str, Any], future: Any) -> bool:
+    """Record the finished task of ``run``: done or failed (True), or pending again (False: the
+    run stopped with the sweep, or the scheduler lost its task)."""
+    if future.status == "finished" and future.result()["status"] == "stopped":
+        run.update(status="pending", error=future.result()["error"])
+        return False
+    if future.status == "finished":
+        sweep.record(run, future.result())
+    elif future.status == "error":
+        exc = future.exception()
+        sweep.record(run, {"status": "failed", "error": f"{type(exc).__name__}: {exc}"})
+    else:  # cancelled: the scheduler lost it
+        run.update(status="pending", error=f"task {future.status} (the scheduler lost it); resume the sweep")
+        return False
     return True
 
 

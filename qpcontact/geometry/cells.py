@@ -54,6 +54,32 @@ def _positive(name: str, arr: np.ndarray) -> None:
         raise InvalidCellsError(f"{name}: must be > 0, got {arr[index]!r} at cell {index}")
 
 
+def _unit_axes(axes: np.ndarray, normalize: bool) -> None:
+    """Divide the (N, 3) axes by their lengths in place; refuse a zero axis, and one not of unit
+    length unless ``normalize``. |a| of axes like 1e200 overflows (and the axis became zero after
+    the division), of axes like 1e-200 underflows: such axes are divided by their largest
+    component first (only those: dividing a unit axis again would change its last bits)."""
+    largest = np.max(np.abs(axes), axis=1)
+    with np.errstate(over="ignore", under="ignore"):
+        norms = np.linalg.norm(axes, axis=1)
+    extreme = (largest > 0) & ~((norms > 1e-150) & (norms < 1e150))
+    if extreme.any():
+        axes[extreme] /= largest[extreme, None]
+        norms[extreme] = np.linalg.norm(axes[extreme], axis=1) * largest[extreme]
+    zero = ~(largest > 0)
+    if zero.any():
+        raise InvalidCellsError(f"axes: zero axis at cell {int(np.flatnonzero(zero)[0])}")
+    off = np.abs(norms - 1.0) > AXIS_UNIT_TOLERANCE
+    if off.any() and not normalize:
+        index = int(np.flatnonzero(off)[0])
+        raise InvalidCellsError(
+            f"axes: not unit length at cell {index} (|a| = {norms[index]:.6g}); "
+            "pass normalize_axes=True to normalize them"
+        )
+    norms[extreme] /= largest[extreme]
+    axes /= norms[:, None]
+
+
 def perpendicular_basis(axes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors e₁, e₂ with (â, e₁, e₂) right-handed orthonormal. For â in the xy-plane,
     e₂ = −ẑ, so a planar scene keeps only e₂."""
@@ -133,34 +159,16 @@ class Cells:
         if negative.any():
             index = int(np.flatnonzero(negative)[0])
             raise InvalidCellsError(f"lengths: must be >= 0, got {arrays['lengths'][index]!r} at cell {index}")
-        # |a| of axes like 1e200 overflows (and the axis became zero after the division), of axes
-        # like 1e-200 underflows: such axes are divided by their largest component first (only
-        # those: dividing a unit axis again would change its last bits).
-        largest = np.max(np.abs(arrays["axes"]), axis=1)
-        with np.errstate(over="ignore", under="ignore"):
-            norms = np.linalg.norm(arrays["axes"], axis=1)
-        extreme = (largest > 0) & ~((norms > 1e-150) & (norms < 1e150))
-        if extreme.any():
-            arrays["axes"][extreme] /= largest[extreme, None]
-            norms[extreme] = np.linalg.norm(arrays["axes"][extreme], axis=1) * largest[extreme]
-        zero = ~(largest > 0)
-        if zero.any():
-            raise InvalidCellsError(f"axes: zero axis at cell {int(np.flatnonzero(zero)[0])}")
-        off = np.abs(norms - 1.0) > AXIS_UNIT_TOLERANCE
-        if off.any() and not normalize_axes:
-            index = int(np.flatnonzero(off)[0])
-            raise InvalidCellsError(
-                f"axes: not unit length at cell {index} (|a| = {norms[index]:.6g}); "
-                "pass normalize_axes=True to normalize them"
-            )
-        norms[extreme] /= largest[extreme]
-        arrays["axes"] /= norms[:, None]
+        _unit_axes(arrays["axes"], normalize_axes)
         # Arrays are private copies (the caller's inputs are never aliased); they stay writeable
         # so that libraries needing writable buffers accept them.
         for name, arr in arrays.items():
             object.__setattr__(self, name, arr)
-        # Inverse masses and inertias must be numbers: radii of 1e-170 (ρ² underflows to 0) or
-        # masses of 1e-320 gave infinite inverse inertias and NaN velocities.
+        self._check_inverses()
+
+    def _check_inverses(self) -> None:
+        """Inverse masses and inertias must be numbers: radii of 1e-170 (ρ² underflows to 0) or
+        masses of 1e-320 gave infinite inverse inertias and NaN velocities."""
         movable = np.isfinite(self.masses)
         with np.errstate(divide="ignore", over="ignore", under="ignore", invalid="ignore"):
             inverses = (("1/m", self.inverse_masses), ("1/I∥ = 2/(mρ²)", self.inverse_inertia_parallel),

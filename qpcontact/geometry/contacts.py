@@ -467,37 +467,56 @@ def select_contacts(cells: Cells, pairs: np.ndarray, margin: float = 0.0, *,
     if not always_closest:
         # Only rods lying side by side keep ends (docstring); every other pair is one contact, at
         # its closest points, as for any two convex bodies.
-        distinct = np.zeros(a.size, dtype=bool)
-        for j in range(2, PAIR_KINDS):
-            for i in range(1, j):
-                apart = (np.abs(s[:, j] - s[:, i]) > near) | (np.abs(t[:, j] - t[:, i]) > near)
-                distinct |= keep[:, i] & keep[:, j] & apart
-        sine = np.linalg.norm(axis_cross(ax, bx), axis=1)
-        keep[~(distinct & (sine <= SIDE_BY_SIDE_SINE)), 1:] = False
-    # Kind 0 is represented by the nearest kept end when that end is as close (to rounding).
+        keep[~_side_by_side(keep, s, t, near, ax, bx), 1:] = False
+    _drop_duplicates(keep, s, t, separation, rounding, near, always_closest)
+    keep[:, 0] |= (separation[:, 0] <= margin) & ~keep.any(axis=1)
+    return _in_pair_order(cells.n, a, b, keep, s)
+
+
+def _side_by_side(keep: np.ndarray, s: np.ndarray, t: np.ndarray, near: np.ndarray, ax: np.ndarray,
+                  bx: np.ndarray) -> np.ndarray:
+    """(P,) the pairs whose rods lie side by side (:func:`select_contacts`): nearly parallel, with
+    two distinct ends of their overlap within reach."""
+    distinct = np.zeros(keep.shape[0], dtype=bool)
+    for j in range(2, PAIR_KINDS):
+        for i in range(1, j):
+            apart = (np.abs(s[:, j] - s[:, i]) > near) | (np.abs(t[:, j] - t[:, i]) > near)
+            distinct |= keep[:, i] & keep[:, j] & apart
+    sine = np.linalg.norm(axis_cross(ax, bx), axis=1)
+    return distinct & (sine <= SIDE_BY_SIDE_SINE)
+
+
+def _drop_duplicates(keep: np.ndarray, s: np.ndarray, t: np.ndarray, separation: np.ndarray, rounding: np.ndarray,
+                     near: np.ndarray, always_closest: bool) -> None:
+    """Drop (in ``keep``) kind 0 where the nearest kept end is as close (to rounding), and the
+    near duplicates, in the order: the contact of least separation (kind 0 or the end that
+    represents it) first, then the other ends by kind (:func:`select_contacts`)."""
     ends = np.where(keep[:, 1:], separation[:, 1:], np.inf)
     nearest_end = 1 + np.argmin(ends, axis=1)
     represented = (ends.min(axis=1) <= separation[:, 0] + rounding) & (not always_closest)
     keep[:, 0] &= ~represented
-    # Near duplicates, in the order: the contact of least separation (kind 0 or the end that
-    # represents it) first, then the other ends by kind.
-    order = np.tile(np.arange(PAIR_KINDS), (a.size, 1))
+    order = np.tile(np.arange(PAIR_KINDS), (keep.shape[0], 1))
     swap = np.flatnonzero(represented)
     order[swap, 0], order[swap, nearest_end[swap]] = nearest_end[swap], 0
-    rows = np.arange(a.size)[:, None]
+    rows = np.arange(keep.shape[0])[:, None]
     s_o, t_o, keep_o = s[rows, order], t[rows, order], keep[rows, order]
     for j in range(1, PAIR_KINDS):
         for i in range(1 if always_closest else 0, j):
             duplicate = keep_o[:, i] & (np.abs(s_o[:, j] - s_o[:, i]) <= near) & (np.abs(t_o[:, j] - t_o[:, i]) <= near)
             keep_o[:, j] &= ~duplicate
     keep[rows, order] = keep_o
-    keep[:, 0] |= (separation[:, 0] <= margin) & ~keep.any(axis=1)
-    # Contacts ordered by pair, then along a (ties by kind: a stable sort of kinds 0..4).
+
+
+def _in_pair_order(n: int, a: np.ndarray, b: np.ndarray, keep: np.ndarray,
+                   s: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The kept contacts ``(a, b, kind)`` ordered by pair, then along a (ties by kind: a stable
+    sort of kinds 0..4)."""
+    rows = np.arange(a.size)[:, None]
     along = np.argsort(np.where(keep, s, np.inf), axis=1, kind="stable")
     kinds = along[keep[rows, along]]
     row = np.repeat(np.arange(a.size), keep.sum(axis=1))
     a_out, b_out = a[row], b[row]
-    key = a_out.astype(np.int64) * max(cells.n, 1) + b_out
+    key = a_out.astype(np.int64) * max(n, 1) + b_out
     if np.any(key[1:] < key[:-1]):
         order_all = np.lexsort((kinds, s[row, kinds], b_out, a_out))
         a_out, b_out, kinds = a_out[order_all], b_out[order_all], kinds[order_all]

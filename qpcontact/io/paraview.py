@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from ..colony.growth import Colony
-from ..errors import InvalidArgumentError
+from ..errors import InvalidArgumentError, NotInstalledError
 from ..timestep.mechanics import CellMechanics
 from .outputs import atomic_write, replacing
 
@@ -49,15 +49,24 @@ def _meshio() -> Any:
     try:
         import meshio
     except ImportError:
-        raise InvalidArgumentError("ParaView files need meshio: pip install 'qpcontact[vtk]'") from None
+        raise NotInstalledError("ParaView files need meshio: pip install 'qpcontact[vtk]'") from None
     return meshio
+
+
+def check_installed() -> None:
+    """Refuse, before any work, to write ParaView files where meshio is missing.
+
+    Raises:
+        NotInstalledError: one line naming the extra to install.
+    """
+    _meshio()
 
 
 def available() -> bool:
     """Whether the ParaView files can be written here (meshio is installed)."""
     try:
         _meshio()
-    except InvalidArgumentError:
+    except NotInstalledError:
         return False
     return True
 

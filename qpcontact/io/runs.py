@@ -15,7 +15,7 @@ Resuming: a run continued from a snapshot of step S (``qpcontact simulate --resu
 ``--start OUT/snapshots/step_S.npz`` with ``--out OUT``) starts at step index S, with the
 snapshot's time, random-generator state and settings, and so follows the same trajectory as
 the run that was not interrupted, bit for bit
-(``tests/colony/test_runs.py::test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one``).
+(``tests/io/test_runs.py::test_an_interrupted_and_resumed_run_equals_the_uninterrupted_one``).
 Its history rows from step S on replace those of the earlier attempt (which may have gone
 further than its last snapshot before being killed); snapshots after S are refused unless
 ``overwrite`` (they would be replaced).

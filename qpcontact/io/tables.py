@@ -33,7 +33,7 @@ from typing import IO, Any
 import numpy as np
 
 from ..colony.growth import Colony
-from ..errors import InvalidArgumentError, OutputFolderError
+from ..errors import InvalidArgumentError, NotInstalledError, OutputFolderError
 from ..timestep.mechanics import CellMechanics
 from .outputs import atomic_write
 from .runs import HISTORY_FIELDS, RunFolder, latest_snapshot
@@ -76,7 +76,7 @@ def _pandas() -> Any:
     try:
         import pandas
     except ImportError:
-        raise InvalidArgumentError(f"DataFrames need pandas: {EXTRA}") from None
+        raise NotInstalledError(f"DataFrames need pandas: {EXTRA}") from None
     return pandas
 
 
@@ -93,7 +93,7 @@ def colony_frame(source: Colony | Snapshot | str | Path, mechanics: CellMechanic
         and, for a file, ``path``.
 
     Raises:
-        InvalidArgumentError: pandas is not installed (the extra ``qpcontact[table]``); a file
+        NotInstalledError: pandas is not installed (the extra ``qpcontact[table]``); InvalidArgumentError: a file
             or folder that is no snapshot or run (:class:`~qpcontact.errors.InvalidSnapshotError`,
             :class:`~qpcontact.errors.OutputFolderError`).
     """
@@ -120,7 +120,7 @@ def run_frame(folder: str | Path) -> Any:
     :data:`~qpcontact.io.runs.HISTORY_FIELDS`, counts as integers) as a ``pandas.DataFrame``.
 
     Raises:
-        InvalidArgumentError: pandas is not installed; the folder has no history or not a run's.
+        NotInstalledError: pandas is not installed; InvalidArgumentError: the folder has no history or not a run's.
     """
     pandas = _pandas()
     return pandas.DataFrame(history_columns(folder))
@@ -185,13 +185,13 @@ def write_parquet(path: Path, columns: Mapping[str, np.ndarray]) -> Path:
     """The columns as a Parquet file (pandas with pyarrow), atomically.
 
     Raises:
-        InvalidArgumentError: pandas or pyarrow is missing (naming the extra).
+        NotInstalledError: pandas or pyarrow is missing (naming the extra).
     """
     try:
         import pandas
         import pyarrow  # noqa: F401  (pandas' Parquet engine; imported here for a clear error)
     except ImportError as exc:
-        raise InvalidArgumentError(f"Parquet files need pandas and pyarrow ({exc.name} is missing): {EXTRA}") from None
+        raise NotInstalledError(f"Parquet files need pandas and pyarrow ({exc.name} is missing): {EXTRA}") from None
     frame = pandas.DataFrame(dict(columns))
     return atomic_write(path, lambda fh: frame.to_parquet(fh, engine="pyarrow", index=False))
 

@@ -396,24 +396,17 @@ def resolve(
         ("reduce", reduce), ("scale", scale), ("estimate_condition", estimate_condition),
         ("keep_separating", keep_separating)))
     planar = flag("planar", planar, allow_none=True)
-    margin = number("margin", margin, minimum=0.0)
     regularization = number("regularization", regularization, minimum=0.0)
     solver_settings = mapping("solver_settings", solver_settings)
     t_start = time.perf_counter()
-    if contacts is not None:
-        check_contacts(contacts, cells)
-    else:
-        # Detection gets the planar decision the system will make (issue 13, item 2): a
-        # monolayer's crossing axes must not get the out-of-plane normal â × b̂.
-        contacts = find_contacts(cells, margin, planar=planar)
+    contacts = _contacts_of(cells, contacts, number("margin", margin, minimum=0.0), planar)
     if keep_separating and solved != "complementarity":
         raise InvalidArgumentError("keep_separating needs a QP solver with formulation='complementarity' "
                                    f"(got solver {solver!r}, formulation {formulation!r})")
     active, b = colliding(contacts, position_correction=position_correction, dt=dt, keep_separating=keep_separating)
     t_detect = time.perf_counter()
-    n_cells = cells.n
     if len(active) == 0:  # nothing to solve: never hand an unconstrained QP to a backend
-        return Result(np.zeros((n_cells, 7)), cells.copy(), active, np.zeros(0), solver, solved, solved_form, True,
+        return Result(np.zeros((cells.n, 7)), cells.copy(), active, np.zeros(0), solver, solved, solved_form, True,
                       "no_contact", 0,
                       {"detect": t_detect - t_start, "assemble": 0.0, "setup": 0.0, "solve": 0.0, "check": 0.0,
                        "total": time.perf_counter() - t_start}, {"penetration": 0.0}, 0, bool(planar))
@@ -424,19 +417,7 @@ def resolve(
                             estimate_condition=estimate_condition)
     y, lam = solution.y, solution.lam
     t_solve = time.perf_counter()
-    errors: dict[str, float] = {}
-    impulses = np.zeros((n_cells, 7))
-    contact_impulses = None
-    if y is not None:
-        impulses = system.to_impulses(y)
-        contact_impulses = system.to_contact_impulses(lam) if lam is not None else None
-        errors["penetration"] = metrics.penetration(system, y)
-        if lam is not None:
-            errors["multiplier_consistency"] = metrics.multiplier_consistency(system, y, lam)
-            if solved == "complementarity":
-                errors["complementarity"] = metrics.complementarity_residual(system, y, lam)
-                errors["duality_gap"] = metrics.duality_gap(system, y, lam)
-        errors.update(metrics.physics(cells, system, impulses, contact_impulses))
+    impulses, contact_impulses, errors = _measured(cells, system, y, lam, solved)
     t_check = time.perf_counter()
     converged = solution.converged
     result = Result(
@@ -465,3 +446,32 @@ def resolve(
     if not converged and on_failure == "raise":
         raise SolverFailedError(f"{solver}/{formulation}: {solution.message}", result)
     return result
+
+
+def _contacts_of(cells: Cells, contacts: Contacts | None, margin: float, planar: bool | None) -> Contacts:
+    """The given contacts, checked, or those found within ``margin``."""
+    if contacts is not None:
+        check_contacts(contacts, cells)
+        return contacts
+    # Detection gets the planar decision the system will make (issue 13, item 2): a monolayer's
+    # crossing axes must not get the out-of-plane normal â × b̂.
+    return find_contacts(cells, margin, planar=planar)
+
+
+def _measured(cells: Cells, system: ContactSystem, y: np.ndarray | None, lam: np.ndarray | None,
+              solved: str) -> tuple[np.ndarray, np.ndarray | None, dict[str, float]]:
+    """``(impulses (N, 7), contact impulses, errors)`` of an answer (zeros and no errors without
+    one): the error measures of :mod:`qpcontact.resolve.metrics`."""
+    errors: dict[str, float] = {}
+    if y is None:
+        return np.zeros((cells.n, 7)), None, errors
+    impulses = system.to_impulses(y)
+    contact_impulses = system.to_contact_impulses(lam) if lam is not None else None
+    errors["penetration"] = metrics.penetration(system, y)
+    if lam is not None:
+        errors["multiplier_consistency"] = metrics.multiplier_consistency(system, y, lam)
+        if solved == "complementarity":
+            errors["complementarity"] = metrics.complementarity_residual(system, y, lam)
+            errors["duality_gap"] = metrics.duality_gap(system, y, lam)
+    errors.update(metrics.physics(cells, system, impulses, contact_impulses))
+    return impulses, contact_impulses, errors

@@ -18,7 +18,7 @@ import os
 from collections.abc import Iterator
 from typing import Any
 
-from ..errors import InvalidArgumentError
+from ..errors import InvalidArgumentError, NotInstalledError
 from ..solvers.ipm import UNKNOWNS_ACCURACY
 from .settings import Settings
 from .signals import Interrupt
@@ -45,14 +45,14 @@ def processes() -> Any | None:
     ``COMM_WORLD``), else None: a run in one process never loads MPI.
 
     Raises:
-        InvalidArgumentError: launched on several processes without petsc4py and mpi4py.
+        NotInstalledError: launched on several processes without petsc4py and mpi4py.
     """
     if launched_size() <= 1:
         return None
     from ..solvers import petsc
 
     if not petsc.installed():
-        raise InvalidArgumentError(
+        raise NotInstalledError(
             f"launched on {launched_size()} MPI processes, but petsc4py and mpi4py cannot be imported: install the "
             "distributed stack with scripts/install-mpi VENV (docs/distributed.md), or run in one process")
     comm = petsc.world()

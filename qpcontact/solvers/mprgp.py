@@ -97,109 +97,146 @@ def mprgp(
     if not (np.isfinite(proportioning) and proportioning > 0):
         raise InvalidArgumentError(f"proportioning: must be finite and > 0, got {proportioning!r}")
     start = time.perf_counter()
-    B = sp.csr_matrix(matrix)
-    Bt = B.T.tocsr()
-    rhs = np.asarray(rhs, dtype=float)
-    k = B.shape[0]
-    diagonal = np.asarray(B.multiply(B).sum(axis=1)).ravel()
-    # A zero row (a contact between cells that cannot move) has no impulse to give: λ̃ = 0 there,
-    # which is optimal if it asks for nothing (b̃ ≤ 0) and leaves the problem infeasible otherwise.
-    empty = diagonal <= 0
-    scale = np.where(empty, 0.0, 1.0 / np.sqrt(np.where(empty, 1.0, diagonal)))
-
-    def apply(v: np.ndarray) -> np.ndarray:
-        return scale * (B @ (Bt @ (scale * v)))
-
-    b = scale * rhs
-    x = np.zeros(k) if initial is None else np.maximum(np.asarray(initial, dtype=float), 0.0) / np.where(empty, 1.0, scale)
-    x[empty] = 0.0
-    cap = max_iterations or 100_000
-    if np.any(rhs[empty] > 0):
-        return IterativeSolution(np.zeros(B.shape[1]), np.zeros(k), 0, False, "infeasible", float(rhs[empty].max()),
+    system = _Scaled(matrix, rhs)
+    k, n = system.B.shape
+    x = system.start(initial)
+    if np.any(system.rhs[system.empty] > 0):
+        return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", float(system.rhs[system.empty].max()),
                                  time.perf_counter() - start)
-    if not np.any(b > 0) and initial is None:  # nothing approaches: λ̃ = 0 is optimal
-        return IterativeSolution(np.zeros(B.shape[1]), np.zeros(k), 0, True, "converged", 0.0, time.perf_counter() - start)
-    step = _expansion_step(apply, k)
-    inverse_scale = np.where(empty, 0.0, 1.0 / np.where(empty, 1.0, scale))
+    if not np.any(system.b > 0) and initial is None:  # nothing approaches: λ̃ = 0 is optimal
+        return IterativeSolution(np.zeros(n), np.zeros(k), 0, True, "converged", 0.0, time.perf_counter() - start)
+    iterate = _Iterate(system, x, _expansion_step(system.apply, k))
+    status, iterations, res = _iterations(iterate, tolerance, max_iterations or 100_000, time_limit, proportioning,
+                                          start)
+    lam = system.scale * iterate.x
+    return IterativeSolution(system.Bt @ lam, lam, iterations, status == "converged", status, res,
+                             time.perf_counter() - start)
 
-    def residual(x: np.ndarray, g: np.ndarray) -> float:
+
+class _Scaled:
+    """The problem in the unknowns ``x = λ̃/scale`` with a unit diagonal: ``Ã = S B̃B̃ᵀ S``,
+    ``b = S b̃``, ``S = diag(1/‖row‖)``. A zero row (a contact between cells that cannot move) has
+    no impulse to give: ``λ̃ = 0`` there, which is optimal if it asks for nothing (``b̃ ≤ 0``) and
+    leaves the problem infeasible otherwise."""
+
+    def __init__(self, matrix: sp.spmatrix, rhs: np.ndarray) -> None:
+        self.B = sp.csr_matrix(matrix)
+        self.Bt = self.B.T.tocsr()
+        self.rhs = np.asarray(rhs, dtype=float)
+        diagonal = np.asarray(self.B.multiply(self.B).sum(axis=1)).ravel()
+        self.empty = diagonal <= 0
+        self.scale = np.where(self.empty, 0.0, 1.0 / np.sqrt(np.where(self.empty, 1.0, diagonal)))
+        self.inverse_scale = np.where(self.empty, 0.0, 1.0 / np.where(self.empty, 1.0, self.scale))
+        self.b = self.scale * self.rhs
+
+    def apply(self, v: np.ndarray) -> np.ndarray:
+        return self.scale * (self.B @ (self.Bt @ (self.scale * v)))
+
+    def start(self, initial: np.ndarray | None) -> np.ndarray:
+        """The first ``x``: zero, or ``initial`` (λ̃) clipped at 0 and scaled."""
+        k = self.B.shape[0]
+        x = np.zeros(k) if initial is None else \
+            np.maximum(np.asarray(initial, dtype=float), 0.0) / np.where(self.empty, 1.0, self.scale)
+        x[self.empty] = 0.0
+        return x
+
+    def residual(self, x: np.ndarray, g: np.ndarray) -> float:
         # In λ̃ = scale·x the gradient is g/scale; zero rows have λ̃ = 0 and are fine (b̃ ≤ 0).
-        return float(np.max(np.abs(np.minimum(scale * x, g * inverse_scale)), initial=0.0))
+        return float(np.max(np.abs(np.minimum(self.scale * x, g * self.inverse_scale)), initial=0.0))
 
-    def cost(x: np.ndarray, g: np.ndarray) -> float:
-        return 0.5 * float(x @ (g - b))  # ½xᵀÃx − bᵀx with g = Ãx − b
+    def cost(self, x: np.ndarray, g: np.ndarray) -> float:
+        return 0.5 * float(x @ (g - self.b))  # ½xᵀÃx − bᵀx with g = Ãx − b
 
-    g = apply(x) - b
-    free = x > 0
-    phi = np.where(free, g, 0.0)  # free gradient
-    beta = np.where(free, 0.0, np.minimum(g, 0.0))  # chopped gradient: contacts at 0 that want to push
-    p = phi.copy()
-    status, iterations, res = "max_iterations", 0, residual(x, g)
+
+class _Iterate:
+    """MPRGP's iterate: ``x``, its gradient ``g = Ãx − b``, the free gradient ``phi`` (on the
+    contacts off the bound), the chopped gradient ``beta`` (contacts at 0 that want to push), the
+    search direction ``p`` and the expansion step length."""
+
+    def __init__(self, system: _Scaled, x: np.ndarray, step: float) -> None:
+        self.system, self.x, self.step = system, x, step
+        self.g = system.apply(x) - system.b
+        self.refresh()
+        self.p = self.phi.copy()
+
+    def refresh(self) -> None:
+        self.free = self.x > 0
+        self.phi = np.where(self.free, self.g, 0.0)
+        self.beta = np.where(self.free, 0.0, np.minimum(self.g, 0.0))
+
+    def residual(self) -> float:
+        return self.system.residual(self.x, self.g)
+
+    def conjugate_or_expand(self) -> bool:
+        """A conjugate gradient step that stays in the face, or an expansion: to the bound along
+        ``p``, then a projected step along the free gradient. False on a breakdown (no curvature)."""
+        apply, x = self.system.apply, self.x
+        Ap = apply(self.p)
+        curvature = float(self.p @ Ap)
+        if not curvature > 0:
+            return False
+        alpha = float(self.g @ self.p) / curvature
+        leaving = self.p > 0
+        feasible = float(np.min(x[leaving] / self.p[leaving])) if leaving.any() else np.inf
+        if alpha <= feasible:  # conjugate gradient step, stays in the face
+            x -= alpha * self.p
+            np.maximum(x, 0.0, out=x)
+            self.g -= alpha * Ap
+            self.refresh()
+            self.p = self.phi - (float(self.phi @ Ap) / curvature) * self.p
+            return True
+        x -= feasible * self.p
+        np.maximum(x, 0.0, out=x)
+        self.g -= feasible * Ap
+        self.refresh()
+        before = self.system.cost(x, self.g)
+        for _ in range(30):
+            trial = np.maximum(x - self.step * self.phi, 0.0)
+            trial_g = apply(trial) - self.system.b
+            if self.system.cost(trial, trial_g) <= before:
+                break
+            self.step *= 0.5  # ‖Ã‖ was underestimated
+        self.x, self.g = trial, trial_g
+        self.refresh()
+        self.p = self.phi.copy()
+        return True
+
+    def proportion(self) -> bool:
+        """Release contacts at the bound along the chopped gradient. False on a breakdown."""
+        Ad = self.system.apply(self.beta)
+        curvature = float(self.beta @ Ad)
+        if not curvature > 0:
+            return False
+        alpha = float(self.g @ self.beta) / curvature
+        self.x -= alpha * self.beta
+        self.g -= alpha * Ad
+        self.refresh()
+        self.p = self.phi.copy()
+        return True
+
+
+def _iterations(it: _Iterate, tolerance: float, cap: int, time_limit: float | None, proportioning: float,
+                start: float) -> tuple[str, int, float]:
+    """MPRGP's loop: ``(status, iterations, residual)``."""
+    iterations, res = 0, it.residual()
     while True:
         if res <= tolerance:
-            g = apply(x) - b  # the recurrence drifts: confirm on a fresh gradient
-            free = x > 0
-            phi, beta = np.where(free, g, 0.0), np.where(free, 0.0, np.minimum(g, 0.0))
-            res = residual(x, g)
+            it.g = it.system.apply(it.x) - it.system.b  # the recurrence drifts: confirm on a fresh gradient
+            it.refresh()
+            res = it.residual()
             if res <= tolerance:
-                status = "converged"
-                break
-            p = phi.copy()
+                return "converged", iterations, res
+            it.p = it.phi.copy()
         if iterations >= cap:
-            break
+            return "max_iterations", iterations, res
         if time_limit is not None and time.perf_counter() - start > time_limit:
-            status = "time_limit"
-            break
+            return "time_limit", iterations, res
         iterations += 1
-        reduced = np.where(free, np.minimum(x / step, phi), 0.0)
-        if float(beta @ beta) <= proportioning**2 * float(reduced @ phi):
-            Ap = apply(p)
-            curvature = float(p @ Ap)
-            if not curvature > 0:
-                status = "breakdown"
-                break
-            alpha = float(g @ p) / curvature
-            leaving = p > 0
-            feasible = float(np.min(x[leaving] / p[leaving])) if leaving.any() else np.inf
-            if alpha <= feasible:  # conjugate gradient step, stays in the face
-                x -= alpha * p
-                np.maximum(x, 0.0, out=x)
-                g -= alpha * Ap
-                free = x > 0
-                phi, beta = np.where(free, g, 0.0), np.where(free, 0.0, np.minimum(g, 0.0))
-                p = phi - (float(phi @ Ap) / curvature) * p
-            else:  # expansion: to the bound along p, then a projected step along the free gradient
-                x -= feasible * p
-                np.maximum(x, 0.0, out=x)
-                g -= feasible * Ap
-                free = x > 0
-                phi = np.where(free, g, 0.0)
-                before = cost(x, g)
-                for _ in range(30):
-                    trial = np.maximum(x - step * phi, 0.0)
-                    trial_g = apply(trial) - b
-                    if cost(trial, trial_g) <= before:
-                        break
-                    step *= 0.5  # ‖Ã‖ was underestimated
-                x, g = trial, trial_g
-                free = x > 0
-                phi, beta = np.where(free, g, 0.0), np.where(free, 0.0, np.minimum(g, 0.0))
-                p = phi.copy()
-        else:  # proportioning: release contacts at the bound along the chopped gradient
-            Ad = apply(beta)
-            curvature = float(beta @ Ad)
-            if not curvature > 0:
-                status = "breakdown"
-                break
-            alpha = float(g @ beta) / curvature
-            x -= alpha * beta
-            g -= alpha * Ad
-            free = x > 0
-            phi, beta = np.where(free, g, 0.0), np.where(free, 0.0, np.minimum(g, 0.0))
-            p = phi.copy()
-        res = residual(x, g)
-    lam = scale * x
-    return IterativeSolution(Bt @ lam, lam, iterations, status == "converged", status, res, time.perf_counter() - start)
+        reduced = np.where(it.free, np.minimum(it.x / it.step, it.phi), 0.0)
+        proportional = float(it.beta @ it.beta) <= proportioning**2 * float(reduced @ it.phi)
+        if not (it.conjugate_or_expand() if proportional else it.proportion()):
+            return "breakdown", iterations, res
+        res = it.residual()
 
 
 def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
-from ..errors import InvalidArgumentError, SolverFailedError
+from ..errors import InvalidArgumentError, NotInstalledError, SolverFailedError
 from . import cholesky
 from .ipm import MAX_ITERATIONS, UNKNOWNS_ACCURACY, Reductions, bounds_of, iterate_rows, make_rows
 from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
@@ -47,8 +47,18 @@ def installed() -> bool:
     return all(importlib.util.find_spec(name) is not None for name in ("petsc4py", "mpi4py"))
 
 
+#: What to install where petsc4py or mpi4py is missing (one line, as the solver's install hint).
+INSTALL_HINT = "needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distributed.md)"
+
+
 def petsc() -> Any:
-    """petsc4py's ``PETSc`` module (MPI initialized on first use)."""
+    """petsc4py's ``PETSc`` module (MPI initialized on first use).
+
+    Raises:
+        NotInstalledError: petsc4py or mpi4py is missing (naming what to install).
+    """
+    if not installed():
+        raise NotInstalledError(f"the distributed stack {INSTALL_HINT}")
     from petsc4py import PETSc
 
     return PETSc
@@ -56,7 +66,11 @@ def petsc() -> Any:
 
 def world() -> Any:
     """The MPI communicator of the processes a distributed step runs on (mpi4py's
-    ``COMM_WORLD``, PETSc's world)."""
+    ``COMM_WORLD``, PETSc's world).
+
+    Raises:
+        NotInstalledError: petsc4py or mpi4py is missing (naming what to install).
+    """
     return petsc().COMM_WORLD.tompi4py()
 
 
@@ -304,6 +318,5 @@ register(SolverSpec(
     solve=_solve, available=installed,
     description="the built-in interior point over MPI processes (PETSc, MUMPS); takes bounds on ỹ",
     settings=("max_iterations", "comm"), blockwise=False, bounds=("contact",),
-    install_hint="needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distributed.md); a run saved by "
-                 "several processes continues in one with --position-solver ipm",
+    install_hint=f"{INSTALL_HINT}; a run saved by several processes continues in one with --position-solver ipm",
 ))

@@ -5,12 +5,13 @@ import pytest
 
 import qpcontact as qc
 from qpcontact.errors import InvalidCellsError
+from qpcontact.geometry.cells import Cells
 
 
 def make(**kw):
     base = dict(centers=np.zeros((2, 3)), axes=[[1, 0, 0], [0, 1, 0]], lengths=[2.0, 1.0], radii=0.5)
     base.update(kw)
-    return qc.Cells(**base)
+    return Cells(**base)  # (qc.Cells is the same class: test_the_public_api_is_the_wings_own below)
 
 
 def test_scalars_broadcast_and_inputs_are_copied():
@@ -114,3 +115,7 @@ def test_world_inverse_inertia_is_the_body_one_turned_from_x_to_the_axis():
     assert np.allclose(cells.apply_inverse_inertia(w)[0], world @ w[0])
     wrong = to_world.T @ body @ to_world  # T taken as world → body
     assert not np.allclose(wrong, world, atol=1e-3 * np.abs(world).max())
+
+
+def test_the_public_api_is_the_wings_own():
+    assert qc.Cells is Cells

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from qpcontact import InvalidArgumentError
+from qpcontact import InvalidArgumentError, NotInstalledError
 from qpcontact.simulation import ranks
 from qpcontact.simulation.settings import Settings
 from qpcontact.solvers.petsc import Partition
@@ -58,8 +58,11 @@ def test_a_launch_without_the_stack_is_a_named_error(monkeypatch):
 
     monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")
     monkeypatch.setattr(petsc, "installed", lambda: False)
-    with pytest.raises(InvalidArgumentError, match="scripts/install-mpi"):
+    with pytest.raises(NotInstalledError, match="scripts/install-mpi"):
         ranks.processes()
+    monkeypatch.delenv("OMPI_COMM_WORLD_SIZE")
+    with pytest.raises(NotInstalledError, match=r"^the distributed stack needs petsc4py and mpi4py: scripts/install-mpi"):
+        petsc.world()  # (issue 35: a ModuleNotFoundError's traceback before)
 
 
 @pytest.mark.parametrize(("values", "match"), [({"position.solver": "clarabel"}, "every process"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import qpcontact as qc
 from qpcontact import cli
+from qpcontact.studies import demo
 
 
 def test_demo_prints_a_row_per_solver_and_formulation(tmp_path, capsys):
@@ -23,3 +24,7 @@ def test_demo_prints_a_row_per_solver_and_formulation(tmp_path, capsys):
 def test_demo_in_3d(tmp_path):
     assert cli.main(["demo", "--cells", "40", "--dimensions", "3", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "demo.md").read_text().startswith("3D colony, 40 cells")
+
+
+def test_the_demo_is_the_command_of_its_module():
+    assert cli.COMMANDS["demo"][0] == demo.__name__

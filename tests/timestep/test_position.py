@@ -387,12 +387,18 @@ def test_end_positions_agree_with_a_tight_step_to_a_thousandth_of_a_diameter(dim
     assert end_difference(default.colony, tight.colony) <= 1e-3
 
 
-def test_a_deep_starting_overlap_is_relaxed_by_relaxation_per_step_as_documented():
-    """docs/model.md: the 0.01 bound is for overlap a step makes; one the cells start with is
+def test_a_deep_starting_overlap_is_relaxed_by_relaxation_per_step_as_the_docs_say():
+    """docs/usage.md: the 0.01 bound is for overlap a step makes; one the cells start with is
     removed by ``relaxation`` (0.05 of a diameter) per step, so a deep start takes steps to clear
     (0.3 deep: 0.25, 0.20, 0.15, ..., 0)."""
+    import re
+    from pathlib import Path
+
     import qpcontact as qc
 
+    usage = " ".join((Path(__file__).resolve().parents[2] / "docs" / "usage.md").read_text().split())
+    assert re.search(r"removes only `relaxation`, 0\.05 of a diameter, of an overlap it starts with, so that no "
+                     r"cell is thrown \(0\.3 deep: 0\.25, 0\.20, 0\.15, \.\.\., 0 after each step\)", usage)
     settings = qc.PositionSettings()
     assert (settings.relaxation, settings.aim, settings.overlap_tolerance) == (0.05, 0.0, 0.01)
     cells = qc.Cells([[0.0, 0.0, 0.0], [0.0, 0.7, 0.0]], [1, 0, 0], 2.0, 0.5)  # 0.3 of a diameter deep

@@ -124,9 +124,9 @@ def test_a_bad_table_source_is_one_line_and_exit_2(run, tmp_path, capsys, argv, 
 
 def test_without_pandas_the_dataframes_and_parquet_name_the_extra(run, tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "pandas", None)  # import pandas raises ImportError
-    with pytest.raises(qc.InvalidArgumentError, match=r"DataFrames need pandas: pip install 'qpcontact\[table\]'"):
+    with pytest.raises(qc.NotInstalledError, match=r"DataFrames need pandas: pip install 'qpcontact\[table\]'"):
         qc.colony_frame(run)
-    with pytest.raises(qc.InvalidArgumentError, match="DataFrames need pandas"):
+    with pytest.raises(qc.NotInstalledError, match="DataFrames need pandas"):
         qc.run_frame(run)
     assert main(["table", str(run), "--out", str(tmp_path / "cells.parquet")]) == 2
     assert "Parquet files need pandas and pyarrow (pandas is missing): pip install 'qpcontact[table]'" in \

@@ -383,7 +383,8 @@ def test_a_killed_worker_loses_no_run_and_only_its_run_is_redone(tmp_path):
                                  "--scheduler", str(scheduler_file), "--out", str(out)], logs / "sweep.log")
         processes.append(client)
         pids = {w.pid: w for w in workers}
-        wait_for(lambda: (gates / "held").exists(), "a run held at step 8", PATIENCE)
+        held = gates / "held"  # (written after it is created: wait for its content)
+        wait_for(lambda: held.exists() and held.read_text().strip(), "a run held at step 8", PATIENCE)
         pid = int((gates / "held").read_text())
         victim = next(name for name in names if any(a["pid"] == pid for a in attempts(out, name)))
         assert pid in pids and RunFolder(out / "runs" / victim).latest_snapshot() is not None
