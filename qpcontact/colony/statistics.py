@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -97,6 +98,10 @@ DEFINITIONS: dict[str, tuple[str, str]] = {
     "height_profile": ("cells", "cells per height bin [k·height_bin, (k+1)·height_bin) from z = 0 (3D)"),
     "elevation_profile": ("dimensionless", "fraction of cells per 15° bin of elevation, 0–15° first (3D)"),
 }
+#: The statistics of a monolayer only, and of a biofilm only (NaN, or empty, in the other).
+PLANAR_ONLY = ("packing", "nematic_length", "local_order", "edge_alignment", "edge_cells", "footprint_area")
+BIOFILM_ONLY = ("bottom_order", "vertical_fraction", "median_height", "bottom_fraction", "elevation_mean", "height_bin",
+                "height_profile", "elevation_profile")
 #: Width of the bins of the elevation profile [deg].
 ELEVATION_BIN = 15.0
 #: A cell is vertical when ``|a_z|`` exceeds this.
@@ -198,9 +203,11 @@ class ColonyStatistics:
                 if not f.name.endswith("_profile")}
 
     def rows(self) -> list[tuple[str, float, str, str]]:
-        """``(name, value, unit, definition)`` of every statistic, each bin of a profile a row
-        of its own (``height_profile[0:0.5]``, ``elevation_profile[0:15]``)."""
-        out = [(name, value, *DEFINITIONS[name]) for name, value in self.scalars().items()]
+        """``(name, value, unit, definition)`` of every statistic that applies in the colony's
+        dimensions (:data:`PLANAR_ONLY`, :data:`BIOFILM_ONLY`), each bin of a profile a row of
+        its own (``height_profile[0:0.5]``, ``elevation_profile[0:15]``)."""
+        other = BIOFILM_ONLY if self.dimensions == 2 else PLANAR_ONLY
+        out = [(name, value, *DEFINITIONS[name]) for name, value in self.scalars().items() if name not in other]
         unit, text = DEFINITIONS["height_profile"]
         out += [(f"height_profile[{k * self.height_bin:g}:{(k + 1) * self.height_bin:g}]", float(count), unit, text)
                 for k, count in enumerate(self.height_profile)]
@@ -217,8 +224,9 @@ def colony_statistics(source: Any, *, dimensions: int | None = None,
     Args:
         source: a :class:`Colony`, a snapshot (:class:`qpcontact.io.Snapshot`, or anything with
             a ``colony`` attribute) or :class:`~qpcontact.Cells`.
-        dimensions: 2 (a monolayer in the xy-plane) or 3 (a biofilm); default: 2 when every
-            centre lies at one height and every axis in the xy-plane, else 3.
+        dimensions: 2 (a monolayer in the xy-plane) or 3 (a biofilm); default: a snapshot's
+            run's (its stored settings), else 2 when every centre lies at one height and every
+            axis in the xy-plane, else 3.
         options: lengths and limits (:class:`StatisticsOptions`; default: the issue's).
 
     Returns:
@@ -234,17 +242,14 @@ def colony_statistics(source: Any, *, dimensions: int | None = None,
     options = StatisticsOptions() if options is None else options
     if not isinstance(options, StatisticsOptions):
         raise InvalidArgumentError(f"options: expected StatisticsOptions, got {type(options).__name__}")
-    dimensions = _dimensions(cells, dimensions)
+    dimensions = _dimensions(cells, _stored_dimensions(source) if dimensions is None else dimensions)
     xy = cells.centers[:, :2]
     theta = np.arctan2(cells.axes[:, 1], cells.axes[:, 0])
-    values: dict[str, Any] = dict(cells=cells.n, dimensions=dimensions, height_bin=options.height_bin,
+    values: dict[str, Any] = dict(cells=cells.n, dimensions=dimensions,
                                   contacts_per_cell=_contacts_per_cell(cells, options.contact_gap, dimensions == 2),
                                   order=_global_order(cells.axes, theta, dimensions), xy_radius=_xy_radius(xy),
                                   aspect_ratio=_aspect_ratio(xy), **_lengths(cells.lengths))
-    nan = dict.fromkeys(("packing", "nematic_length", "local_order", "edge_alignment", "edge_cells",
-                         "footprint_area", "bottom_order", "vertical_fraction", "median_height", "bottom_fraction",
-                         "elevation_mean"), math.nan)
-    values.update(nan)
+    values.update(dict.fromkeys([n for n in (*PLANAR_ONLY, *BIOFILM_ONLY) if not n.endswith("_profile")], math.nan))
     if dimensions == 2:
         values.update(_planar(cells, xy, theta, options))
     else:
@@ -264,6 +269,17 @@ def _cells_of(source: Any) -> Cells:
     if found.n == 0:
         raise InvalidArgumentError("source: the colony has no cells; statistics need at least one")
     return found
+
+
+def _stored_dimensions(source: Any) -> int | None:
+    """The dimensions of the run a snapshot's stored settings name (``[run] dimensions``, or
+    the flat ``dimensions`` of earlier versions), if any."""
+    settings = getattr(source, "settings", None)
+    if not isinstance(settings, Mapping):
+        return None
+    run = settings.get("run")
+    value = run.get("dimensions") if isinstance(run, Mapping) else settings.get("dimensions")
+    return value if value in (2, 3) and not isinstance(value, bool) else None
 
 
 def _dimensions(cells: Cells, dimensions: int | None) -> int:
@@ -465,7 +481,7 @@ def _biofilm(cells: Cells, theta: np.ndarray, options: StatisticsOptions) -> dic
     bins = int(round(90.0 / ELEVATION_BIN))
     elevation_counts = np.bincount(np.minimum((elevation / ELEVATION_BIN).astype(np.intp), bins - 1), minlength=bins)
     heights = np.bincount((np.maximum(z, 0.0) / options.height_bin).astype(np.intp))
-    return dict(bottom_order=local_order(cells.centers[bottom, :2], theta[bottom], options.local_radius),
+    return dict(height_bin=options.height_bin, bottom_order=local_order(cells.centers[bottom, :2], theta[bottom], options.local_radius),
                 vertical_fraction=float(vertical.mean()), median_height=float(np.median(z)),
                 bottom_fraction=float(bottom.mean()), elevation_mean=float(elevation.mean()),
                 height_profile=tuple(int(c) for c in heights),

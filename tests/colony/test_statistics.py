@@ -11,6 +11,7 @@ from scipy.special import j0, j1
 
 import qpcontact as qc
 from qpcontact.colony.statistics import (
+    BIOFILM_ONLY,
     DEFINITIONS,
     ColonyStatistics,
     StatisticsOptions,
@@ -183,6 +184,9 @@ def test_a_three_dimensional_stack_has_its_layers_heights_and_vertical_cells():
     # mean square radius: 32 cells at every site (x² 12.0125 + y² 1.5125 on average), 8 at y = ±0.55
     assert s.xy_radius == pytest.approx(math.sqrt((32 * 13.525 + 8 * (12.0125 + 0.3025)) / 40))
     assert math.isnan(s.packing) and math.isnan(s.nematic_length) and math.isnan(s.edge_alignment)
+    names = [row[0] for row in s.rows()]
+    assert "packing" not in names and names[-6:] == [f"elevation_profile[{a}:{a + 15}]" for a in range(0, 90, 15)]
+    assert "height_profile[4:4.5]" in names
     flat = colony_statistics(aligned_block(4, 4)[0])
     assert math.isnan(flat.vertical_fraction) and flat.height_profile == ()
 
@@ -202,7 +206,7 @@ def test_a_snapshot_a_colony_and_the_cells_give_the_same_statistics(tmp_path):
     assert colony_statistics(colony) == by_cells
     assert colony_statistics(load_snapshot(path)) == by_cells
     rows = by_cells.rows()
-    assert {name for name, *_ in rows} == {n for n in DEFINITIONS if not n.endswith("_profile")}
+    assert {name for name, *_ in rows} == set(DEFINITIONS) - set(BIOFILM_ONLY)
     assert all(unit == DEFINITIONS[name][0] for name, _, unit, _ in rows)
 
 
