@@ -202,6 +202,18 @@ class ColonyStatistics:
         return {f.name: float(getattr(self, f.name)) for f in dataclasses.fields(self)
                 if not f.name.endswith("_profile")}
 
+    def summary(self) -> str:
+        """The statistics issue 32 names, in one line with their units (2D: packing, contacts per
+        cell, nematic length, local order, edge alignment; 3D: bottom-layer order, vertical and
+        bottom fractions, median height, xy radius)."""
+        if self.dimensions == 2:
+            return (f"packing {self.packing:.3f}, {self.contacts_per_cell:.2f} contacts/cell, nematic length "
+                    f"{self.nematic_length:.2f} µm, local S {self.local_order:.3f}, edge alignment "
+                    f"{self.edge_alignment:+.2f}")
+        return (f"bottom-layer S {self.bottom_order:.3f}, vertical {self.vertical_fraction:.3f}, median height "
+                f"{self.median_height:.2f} µm, bottom fraction {self.bottom_fraction:.3f}, xy radius "
+                f"{self.xy_radius:.1f} µm")
+
     def rows(self) -> list[tuple[str, float, str, str]]:
         """``(name, value, unit, definition)`` of every statistic that applies in the colony's
         dimensions (:data:`PLANAR_ONLY`, :data:`BIOFILM_ONLY`), each bin of a profile a row of

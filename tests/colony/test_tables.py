@@ -229,3 +229,15 @@ def test_table_of_statistics_is_one_row_per_statistic_with_its_unit(run, tmp_pat
     capsys.readouterr()
     assert main(["table", str(run), "--statistics", "--history"]) == 2
     assert "--statistics: measures a snapshot" in capsys.readouterr().err
+
+
+def test_plot_writes_the_statistics_under_the_title(run, tmp_path, monkeypatch):
+    from qpcontact.io import plots
+
+    titles = []
+    real = plots.save_colony_picture
+    monkeypatch.setattr(plots, "save_colony_picture", lambda path, cells, title, **kw: titles.append(title) or
+                        real(path, cells, title, **kw))
+    assert main(["plot", str(run), "--statistics", "--out", str(tmp_path / "s.png")]) == 0
+    expected = qc.colony_statistics(load_snapshot(last(run)))
+    assert f"packing {expected.packing:.3f}" in titles[0] and "contacts/cell" in titles[0]
