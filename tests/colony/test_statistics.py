@@ -187,6 +187,7 @@ def test_a_three_dimensional_stack_has_its_layers_heights_and_vertical_cells():
     names = [row[0] for row in s.rows()]
     assert "packing" not in names and names[-6:] == [f"elevation_profile[{a}:{a + 15}]" for a in range(0, 90, 15)]
     assert "height_profile[4:4.5]" in names
+    assert s.summary().startswith("bottom-layer S 1.000, vertical 0.200, median height 1.60 µm, bottom fraction 0.400")
     flat = colony_statistics(aligned_block(4, 4)[0])
     assert math.isnan(flat.vertical_fraction) and flat.height_profile == ()
 
