@@ -12,7 +12,7 @@ linearizations of the position step.
 
 Each run is a run of :func:`qpcontact.simulation.run_colony` in its own folder ``runs/<name>/``
 (``growth_per_step-0.05__seed-1``), in the format of ``qpcontact simulate`` and run as a sweep's
-task (:func:`qpcontact.ensembles.sweep.run_task`): its ``result.json`` once it is finished, and
+task (:func:`qpcontact.ensembles.tasks.run_task`): its ``result.json`` once it is finished, and
 ``statistics.json``, the statistics of its final colony. Runs go one after another in this
 process, the cheapest step first. Nothing finished is lost: a study stopped (Ctrl-C, a killed
 process) is continued by ``qpcontact convergence --resume --out FOLDER``, which skips the runs
@@ -40,14 +40,15 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import comma_list, non_negative_int, output_folder, positive_float, run_standalone
+from ..cli import comma_list, non_negative_int, output_folder, positive_float, run_standalone
 from ..colony.statistics import DEFINITIONS, colony_statistics
-from ..described import Layer, settings_of
-from ..ensembles.sweep import RESULT_FILE, read_json, run_name, run_task
+from ..ensembles.grid import grid_layer, run_name
+from ..ensembles.tasks import ATTEMPTS_FILE, LOCK_FILE, RESULT_FILE, read_json, run_task
 from ..errors import InvalidArgumentError, OutputFolderError
+from ..io.outputs import describe_written, prepare_folder, replacing, write_csv, write_text
 from ..io.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder
 from ..io.snapshots import load_snapshot
-from ..outputs import describe_written, prepare_folder, replacing, write_csv, write_text
+from ..schema import Layer, settings_of
 from ..simulation.settings import Settings, add_setting_flags, file_layer, flag_layer, merge, refuse_unused
 
 FORMAT = "qpcontact-convergence"
@@ -59,8 +60,8 @@ PLOT_FILE = "convergence.png"
 STATISTICS_FILE = "statistics.json"
 #: Every file the study writes in its folder (glob patterns).
 OUTPUTS = (PLAN_FILE, RUNS_FILE, TABLE_FILE, PLOT_FILE,
-           *(f"runs/*/{pattern}" for pattern in (*RUN_OUTPUTS, *LEFTOVERS, RESULT_FILE, STATISTICS_FILE,
-                                                 "attempts.jsonl", ".run.lock")))
+           *(f"runs/*/{pattern}" for pattern in (*RUN_OUTPUTS, *LEFTOVERS, RESULT_FILE, STATISTICS_FILE, ATTEMPTS_FILE,
+                                                 LOCK_FILE)))
 #: The statistics printed and plotted, by dimensions (issue 32's).
 REPORTED = {2: ("packing", "contacts_per_cell", "nematic_length", "local_order", "edge_alignment"),
             3: ("bottom_order", "vertical_fraction", "median_height", "bottom_fraction", "xy_radius")}
@@ -365,7 +366,7 @@ def configure(args: argparse.Namespace) -> tuple[Settings, list[float], list[int
     if len(set(seeds)) != len(seeds):
         raise InvalidArgumentError(f"--seeds: each seed once, got {','.join(map(str, seeds))}")
     runs = [base.updated({"growth_per_step": step, "seed": seed}, "--growth-per-step") for step in steps for seed in seeds]
-    refuse_unused(runs, [*layers, Layer("--growth-per-step", {"run.growth_per_step": steps[0]}, "grid")])
+    refuse_unused(runs, [*layers, grid_layer("--growth-per-step", {"growth_per_step": steps[0]})])
     return base, steps, seeds
 
 
