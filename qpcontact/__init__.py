@@ -24,6 +24,7 @@ from . import moved  # first: it installs the old paths of moved modules, for on
 from .assembly import ContactSystem, build_system
 from .colony import (
     Colony,
+    colony_statistics,
     divide,
     expansion_time_step,
     grow,
@@ -69,7 +70,7 @@ __all__ = [
     "InvalidCellsError", "NotInstalledError", "Plane", "QPContactError", "Result", "SolverFailedError", "SolverNotInstalledError",
     "SolverSpec", "StepResult", "SystemSolution", "TooManyContactsError", "UnknownSolverError", "available_solvers",
     "build_system", "cell_forces", "cell_pressure", "cell_stress", "channel", "colliding",
-    "colony_frame", "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
+    "colony_frame", "colony_statistics", "compare_with_linear", "concatenate", "divide", "expansion_time_step", "find_contacts", "get_solver", "grow",
     "load_colony", "plane_contacts", "pressure_growth_rate", "read_cellmodeller", "reference_solution", "resolve", "run_frame", "save_colony", "solve_system", "step",
     "substrate",
 ]

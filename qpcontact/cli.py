@@ -193,6 +193,8 @@ COMMANDS = {
     "bench-grown": ("qpcontact.studies.grown", "time to grow a colony from one cell, and one step of a grown colony, "
                     "for each step kind (the benchmark that counts)"),
     "bench": ("qpcontact.studies.bench", "time each phase of a step on colony snapshots"),
+    "convergence": ("qpcontact.studies.convergence", "the colony's statistics against run time as the step shrinks, "
+                    "over seeds: the error of a step size"),
     "sweep": ("qpcontact.ensembles.sweep", "replicates and parameter sweeps of colony runs, as tasks on Dask"),
     "table": ("qpcontact.io.tables", "a snapshot's cells, or a run's time series, as a CSV or Parquet table"),
     "plot": ("qpcontact.simulation.picture", "draw a saved snapshot again as its run drew colony.png"),

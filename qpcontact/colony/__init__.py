@@ -5,7 +5,9 @@
   :func:`growth_time_step` and :func:`expansion_time_step`;
 - :mod:`.pressure`: growth slowed by pressure (:func:`pressure_growth_rate`,
   :class:`PressureGrowth`);
-- :mod:`.hooks`: model hooks, the user's per-step function (:class:`StepControl`).
+- :mod:`.hooks`: model hooks, the user's per-step function (:class:`StepControl`);
+- :mod:`.statistics`: :func:`colony_statistics`, the packing, contacts, microdomains, edge
+  alignment and (3D) layers of a colony state (:class:`ColonyStatistics`; docs/statistics.md).
 
 Imports the per-timestep calls (:mod:`qpcontact.timestep`) and the wings below them only. The
 run loop and its settings are :mod:`qpcontact.simulation`, what a run writes and reads
@@ -32,6 +34,7 @@ from .growth import (
 )
 from .hooks import StepControl, push
 from .pressure import GROWTH_LAWS, PressureGrowth, pressure_growth_rate
+from .statistics import ColonyStatistics, StatisticsOptions, colony_statistics
 
 
 def __getattr__(name: str) -> Any:
@@ -40,6 +43,7 @@ def __getattr__(name: str) -> Any:
 
 
 __all__ = [
-    "GROWTH_LAWS", "Colony", "PressureGrowth", "StepControl", "daughters_share", "divide", "expansion_time_step", "grow",
-    "grow_position", "growth_drive", "growth_step", "growth_time_step", "pressure_growth_rate", "push", "volumes",
+    "GROWTH_LAWS", "Colony", "ColonyStatistics", "PressureGrowth", "StatisticsOptions", "StepControl",
+    "colony_statistics", "daughters_share", "divide", "expansion_time_step", "grow", "grow_position",
+    "growth_drive", "growth_step", "growth_time_step", "pressure_growth_rate", "push", "volumes",
 ]

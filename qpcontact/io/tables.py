@@ -14,10 +14,14 @@
   (``history.csv``; columns :data:`~qpcontact.io.runs.HISTORY_FIELDS`). pandas is the
   optional extra ``qpcontact[table]`` (with pyarrow, for Parquet files); it is imported only
   by these.
+- :func:`statistics_columns`: the statistics of a snapshot's colony
+  (:func:`qpcontact.colony.colony_statistics`) as a table: one row per statistic, columns
+  :data:`STATISTICS_COLUMNS` (``statistic``, ``value``, ``unit``, ``definition``).
 - ``qpcontact table RUN_OR_SNAPSHOT``: a snapshot's cells (or, for a run folder, those of its
-  latest snapshot, ``--snapshot N``, or its time series, ``--history``) as CSV on stdout or in
-  ``--out FILE.csv`` (no pandas needed), or as Parquet (``--out FILE.parquet``, needs the
-  extra), written atomically and never over an existing file without ``--overwrite``.
+  latest snapshot, ``--snapshot N``, or its time series, ``--history``), or its statistics
+  (``--statistics``), as CSV on stdout or in ``--out FILE.csv`` (no pandas needed), or as
+  Parquet (``--out FILE.parquet``, needs the extra), written atomically and never over an
+  existing file without ``--overwrite``.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from typing import IO, Any
 import numpy as np
 
 from ..colony.growth import Colony
+from ..colony.statistics import colony_statistics
 from ..errors import InvalidArgumentError, NotInstalledError, OutputFolderError
 from ..timestep.mechanics import CellMechanics
 from .outputs import atomic_write
@@ -48,6 +53,8 @@ CELL_COLUMNS = ("id", "parent_id", "cell_type", "x", "y", "z", "axis_x", "axis_y
 MECHANICS_COLUMNS = ("pressure", *(f"stress_{a}{b}" for a in "xyz" for b in "xyz"))
 #: The files ``qpcontact table --out`` writes, by suffix.
 SUFFIXES = (".csv", ".parquet")
+#: The columns of a table of statistics (``qpcontact table --statistics``), one row per statistic.
+STATISTICS_COLUMNS = ("statistic", "value", "unit", "definition")
 #: History columns that count (integers in a table).
 _COUNTS = ("step", "cells", "contacts", "rejected", "linearizations")
 
@@ -70,6 +77,15 @@ def colony_columns(colony: Colony, mechanics: CellMechanics | None = None) -> di
         else:
             columns.update((f"{key}_{i}", column) for i, column in enumerate(values.reshape(cells.n, -1).T))
     return columns
+
+
+def statistics_columns(snapshot: Snapshot | Colony) -> dict[str, np.ndarray]:
+    """The statistics of a snapshot's (or a colony's) state as columns :data:`STATISTICS_COLUMNS`:
+    one row per statistic, each bin of a profile a row (:meth:`ColonyStatistics.rows
+    <qpcontact.colony.ColonyStatistics.rows>`); values NaN where a statistic does not apply."""
+    rows = colony_statistics(snapshot).rows()
+    return {"statistic": np.array([r[0] for r in rows]), "value": np.array([r[1] for r in rows], dtype=float),
+            "unit": np.array([r[2] for r in rows]), "definition": np.array([r[3] for r in rows])}
 
 
 def _pandas() -> Any:
@@ -200,14 +216,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = (
         "A table of a colony run: one row per cell of a snapshot (id, parent_id, cell_type, centre, axis, length, "
         "radius, rate, owed, pressure and stress where the snapshot has them, and the model's own per-cell arrays), "
-        "or one row per step of a run (--history). CSV on stdout, or --out FILE.csv / FILE.parquet (Parquet needs "
-        f"{EXTRA}).")
+        "one row per statistic of a snapshot's colony (--statistics), or one row per step of a run (--history). CSV on "
+        f"stdout, or --out FILE.csv / FILE.parquet (Parquet needs {EXTRA}).")
     parser.add_argument("source", type=Path, metavar="RUN_OR_SNAPSHOT",
                         help="a snapshot (.npz), or a run's folder (its latest snapshot, --snapshot, or --history)")
     which = parser.add_mutually_exclusive_group()
     which.add_argument("--snapshot", metavar="N|NAME",
                        help="of a run's folder: the snapshot of step N, or the file NAME in its snapshots/")
     which.add_argument("--history", action="store_true", help="of a run's folder: its time series (history.csv)")
+    parser.add_argument("--statistics", action="store_true",
+                        help="the snapshot's colony statistics instead of its cells: one row per statistic (statistic, "
+                             "value, unit, definition): packing, contacts per cell, nematic correlation length, local "
+                             "order, edge alignment, lengths, aspect ratio, 3D layers (docs/statistics.md)")
     parser.add_argument("--out", type=Path, metavar="FILE", help="write FILE.csv or FILE.parquet (default: CSV on stdout)")
     parser.add_argument("--overwrite", action="store_true", help="replace --out if it exists (default: refuse)")
 
@@ -222,6 +242,8 @@ def run_command(args: argparse.Namespace) -> int:
             raise OutputFolderError(f"--out {out}: exists; pass --overwrite to replace it")
         if out.is_dir():
             raise OutputFolderError(f"--out {out}: is a folder, not a file")
+    if args.history and args.statistics:
+        raise InvalidArgumentError("--statistics: measures a snapshot; --history is a run's time series: give one")
     if args.history:
         if not args.source.is_dir():
             raise InvalidArgumentError(f"--history: names a run's folder, but {args.source} is "
@@ -232,7 +254,7 @@ def run_command(args: argparse.Namespace) -> int:
             return _emit(out, lambda fh: _rows_as_text(fh, HISTORY_FIELDS, rows))
     else:
         snapshot = load_snapshot(snapshot_file(args.source, args.snapshot))
-        columns = colony_columns(snapshot.colony, snapshot.mechanics)
+        columns = statistics_columns(snapshot) if args.statistics else colony_columns(snapshot.colony, snapshot.mechanics)
     if out is not None and out.suffix.lower() == ".parquet":
         print(f"wrote {write_parquet(out, columns)}", file=sys.stderr)
         return 0

@@ -8,22 +8,24 @@ again as its run drew ``colony.png``.
 
 The picture of ``qpcontact plot`` is :func:`colony_picture` of the snapshot's colony, with
 the run's settings stored in the snapshot (dimensions, planes, the step and solver in the
-title): from above, and from the side too in 3D, coloured by ``--color`` (orientation,
-pressure, cell_type, or the name of one of the model's own per-cell arrays,
-:func:`qpcontact.io.plots.colony_colors`). A snapshot without settings (version 1, or
-written by another tool) is drawn with the default settings, in 3D if a cell lies off the plane
-``z = 0``.
+title; with ``--statistics`` the colony's statistics under it, docs/statistics.md): from above,
+and from the side too in 3D, coloured by ``--color`` (orientation, pressure, cell_type, or the
+name of one of the model's own per-cell arrays, :func:`qpcontact.io.plots.colony_colors`). A
+snapshot without settings (version 1, or written by another tool) is drawn with the default
+settings, in 3D if a cell lies off the plane ``z = 0``.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
 
 from ..colony.growth import Colony
+from ..colony.statistics import colony_statistics
 from ..errors import InvalidArgumentError, OutputFolderError
 from ..io.runs import RunFolder
 from ..io.snapshots import Snapshot, load_snapshot
@@ -98,9 +100,11 @@ def snapshot_settings(snapshot: Snapshot) -> Settings:
     return Settings().updated({"dimensions": 2 if flat else 3})
 
 
-def plot_snapshot(snapshot: Snapshot, path: str | Path, color: str = "orientation") -> Path:
+def plot_snapshot(snapshot: Snapshot, path: str | Path, color: str = "orientation", *,
+                  statistics: bool = False) -> Path:
     """Draw ``snapshot`` into ``path`` (PNG, SVG, PDF, ... by the suffix) as its run drew
-    ``colony.png`` (module docstring). Returns the path.
+    ``colony.png`` (module docstring); with ``statistics``, the colony's statistics
+    (:meth:`qpcontact.colony.ColonyStatistics.summary`) under the title. Returns the path.
 
     Raises:
         InvalidArgumentError: ``color`` names nothing to colour by, or ``pressure`` for a
@@ -112,6 +116,8 @@ def plot_snapshot(snapshot: Snapshot, path: str | Path, color: str = "orientatio
     settings = snapshot_settings(snapshot)
     colony = snapshot.colony
     title = f"{colony.cells.n} cells at t = {colony.time:.2f} doubling times ({describe_run(settings)})"  # the run's
+    if statistics:
+        title += "\n" + textwrap.fill(colony_statistics(snapshot, dimensions=settings.run.dimensions).summary(), 80)
     return colony_picture(Path(path), colony, snapshot.mechanics, settings, color, title)
 
 
@@ -128,6 +134,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--color", default="orientation", metavar="NAME",
                         help="orientation (default), pressure, cell_type, or the name of a per-cell array of the "
                              "model (cell_data) with one number per cell")
+    parser.add_argument("--statistics", action="store_true",
+                        help="write the colony's statistics under the title: packing, contacts per cell, nematic "
+                             "length, local order, edge alignment (3D: the biofilm's layers; docs/statistics.md)")
     parser.add_argument("--overwrite", action="store_true", help="replace --out if it exists (default: refuse)")
 
 
@@ -144,7 +153,7 @@ def run_command(args: argparse.Namespace) -> int:
         raise OutputFolderError(f"--out {out}: exists; pass --overwrite to replace it")
     snapshot = load_snapshot(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    print(f"wrote {plot_snapshot(snapshot, out, args.color)}", file=sys.stderr)
+    print(f"wrote {plot_snapshot(snapshot, out, args.color, statistics=args.statistics)}", file=sys.stderr)
     return 0
 
 

@@ -7,8 +7,8 @@ Nothing in the other wings imports from here.
   cases of the stability report (:data:`CATALOGUE`);
 - :mod:`.harness`: what the comparison and the stability report share (:func:`prepare`,
   :func:`guarded`);
-- commands: :mod:`.demo`, :mod:`.compare`, :mod:`.stability`, :mod:`.bench`, :mod:`.grown`
-  (``qpcontact COMMAND``); ``compare`` and ``stability`` hand their runs to Dask with
+- commands: :mod:`.demo`, :mod:`.compare`, :mod:`.stability`, :mod:`.bench`, :mod:`.grown`,
+  :mod:`.convergence` (``qpcontact COMMAND``); ``compare`` and ``stability`` hand their runs to Dask with
   ``--scheduler``/``--workers`` (:mod:`qpcontact.ensembles.cluster`).
 
 ``qpcontact sweep`` (a user feature, not a study) is :mod:`qpcontact.ensembles.sweep`; the

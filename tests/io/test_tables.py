@@ -212,3 +212,32 @@ def test_a_bad_plot_is_one_line_and_exit_2(run, tmp_path, capsys, argv, message)
     err = capsys.readouterr().err
     assert message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "p.png").exists()
+
+
+def test_table_of_statistics_is_one_row_per_statistic_with_its_unit(run, tmp_path, capsys):
+    assert main(["table", str(run), "--statistics"]) == 0
+    header, rows = read_csv(capsys.readouterr().out)
+    assert header == ["statistic", "value", "unit", "definition"]
+    by_name = {row[0]: row for row in rows}
+    expected = qc.colony_statistics(load_snapshot(last(run)))
+    assert float(by_name["packing"][1]) == expected.packing and by_name["nematic_length"][2] == "µm"
+    assert 0.5 < expected.packing <= 1.0 and "vertical_fraction" not in by_name  # a 2D run: no 3D rows
+    out = tmp_path / "statistics.csv"
+    assert main(["table", str(run), "--snapshot", "40", "--statistics", "--out", str(out)]) == 0
+    earlier = {row[0]: float(row[1]) for row in read_csv(out.read_text())[1]}
+    assert earlier["cells"] == load_snapshot(run / "snapshots" / "step_000040.npz").colony.cells.n
+    capsys.readouterr()
+    assert main(["table", str(run), "--statistics", "--history"]) == 2
+    assert "--statistics: measures a snapshot" in capsys.readouterr().err
+
+
+def test_plot_writes_the_statistics_under_the_title(run, tmp_path, monkeypatch):
+    from qpcontact.io import plots
+
+    titles = []
+    real = plots.save_colony_picture
+    monkeypatch.setattr(plots, "save_colony_picture", lambda path, cells, title, **kw: titles.append(title) or
+                        real(path, cells, title, **kw))
+    assert main(["plot", str(run), "--statistics", "--out", str(tmp_path / "s.png")]) == 0
+    expected = qc.colony_statistics(load_snapshot(last(run)))
+    assert f"packing {expected.packing:.3f}" in titles[0] and "contacts/cell" in titles[0]
