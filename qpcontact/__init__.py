@@ -5,15 +5,18 @@ Data flow, one wing each (a wing imports only from itself and the wings before i
 :mod:`~qpcontact.assembly` (:func:`build_system`) → :mod:`~qpcontact.solvers` (one registry:
 the plain linear solve, MPRGP, every qpsolvers backend) → :mod:`~qpcontact.resolve`
 (:func:`resolve`, one call per step, every answer checked → :class:`Result`) →
-:mod:`~qpcontact.timestep` (the per-timestep calls: the position-level step :func:`position_step`
-— what ``qpcontact simulate`` runs — and the velocity-level :func:`step`; the stress and
+:mod:`~qpcontact.timestep` (the per-timestep calls, each with its settings: the position-level
+step :func:`position_step` (:class:`PositionSettings`) — what ``qpcontact simulate`` runs — and
+the velocity-level :func:`step` (:class:`VelocitySettings`); the stress and
 pressure of each cell from the contact forces: :func:`cell_stress`, :func:`cell_pressure`) →
 :mod:`~qpcontact.colony` (the colony model: :class:`Colony`, :func:`grow_position`,
-:func:`grow`, :func:`divide`, time-step rules, model hooks) → :mod:`~qpcontact.io` (what a run
+:func:`grow`, :func:`divide`, time-step rules, growth slowed by pressure
+(:func:`pressure_growth_rate`), model hooks) → :mod:`~qpcontact.io` (what a run
 writes and reads: snapshots, run folders, CellModeller's states (:func:`read_cellmodeller`),
 tables of a snapshot's cells and of a run's steps as pandas DataFrames: :func:`colony_frame`,
-:func:`run_frame`) → :mod:`~qpcontact.simulation` (the run loop ``run_colony`` and its
-settings) → :mod:`~qpcontact.ensembles` (sweeps on Dask). The studies
+:func:`run_frame`) → :mod:`~qpcontact.simulation` (the run of a colony: its settings, step
+policy, loop ``run_colony`` and recording) → :mod:`~qpcontact.ensembles` (sweeps on Dask). A
+missing optional part raises :class:`NotInstalledError`, one line naming what to install. The studies
 (:mod:`qpcontact.studies`: scenes, catalogue, comparison, stability, benchmark, demo) sit on
 top and are not imported here. docs/architecture.md describes the layout.
 """
