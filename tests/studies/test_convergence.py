@@ -111,3 +111,22 @@ def test_a_bad_study_is_one_line_and_exit_2_before_any_run(tmp_path, capsys, arg
 def test_a_study_is_not_replaced_without_overwrite(study, capsys):
     assert cli.main(["convergence", *ARGS, "--out", str(study)]) == 2
     assert "continue it with --resume" in capsys.readouterr().err
+
+
+def test_a_failed_run_is_reported_by_name_and_the_others_all_the_same(tmp_path, monkeypatch, capsys):
+    real = convergence.run_task
+
+    def coarse_fails(name, settings, folder):
+        if "0.1" in name:
+            return {"name": name, "status": "failed", "error": "TooManyContactsError: 2.4e6 candidate pairs"}
+        return real(name, settings, folder)
+
+    monkeypatch.setattr(convergence, "run_task", coarse_fails)
+    out = tmp_path / "study"
+    assert cli.main(["convergence", *ARGS, "--out", str(out)]) == 1
+    assert "growth_per_step-0.1__seed-1: failed: TooManyContactsError" in capsys.readouterr().err
+    finest, coarse = read_rows(out / convergence.TABLE_FILE)
+    assert (finest["runs"], finest["failed"], coarse["runs"], coarse["failed"]) == ("1", "0", "0", "1")
+    assert coarse["packing_mean"] == "nan" and float(finest["packing_mean"]) > 0.5
+    statuses = {r["name"]: (r["status"], r["error"]) for r in read_rows(out / convergence.RUNS_FILE)}
+    assert statuses["growth_per_step-0.1__seed-1"] == ("failed", "TooManyContactsError: 2.4e6 candidate pairs")
