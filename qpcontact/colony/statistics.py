@@ -43,7 +43,7 @@ are the same). Definitions, as issue 32 gives them:
 
 A statistic that does not apply (a 3D one in 2D and the reverse) or cannot be measured (no
 pairs) is NaN. Cost: vectorized (KD-trees, ``bincount``, distance transforms), no loop over
-cells; about 0.5 s at 2·10⁴ cells (docs/statistics.md).
+cells; 0.44 s of CPU time at 2·10⁴ cells (docs/statistics.md).
 """
 
 from __future__ import annotations
