@@ -83,11 +83,7 @@ def _code_lines(function: ast.FunctionDef) -> int:
 
 #: Modules of the package that may still break the size rules below, each with why, to be
 #: removed from here when it is fixed.
-KNOWN_TOO_LONG = {
-    # The lead rewrites the position step (issue 32): position_step under 60 lines and the module
-    # under 700 are part of that rewrite; delete this entry with it.
-    "qpcontact/timestep/position.py": "issue 32",
-}
+KNOWN_TOO_LONG: dict[str, str] = {}
 
 
 def _long_functions(path: Path) -> list[str]:

@@ -1,6 +1,6 @@
 """The position-level step: non-penetration at the end of the step, by sequential linearization.
 
-The velocity-level :func:`qpcontact.colony.step.step` makes contacts stop approaching at the
+The velocity-level :func:`qpcontact.timestep.step` makes contacts stop approaching at the
 start of the step, which holds to first order in ``dt``; its time step must shrink as the colony
 grows, and overlap accumulates where cells turn. This step instead asks for the *positions at the
 end of the step* to be free of overlap (the "hard model" of growing rod colonies, backward Euler
@@ -57,21 +57,15 @@ import numpy as np
 from ..assembly.system import ContactSystem, Turned, build_system
 from ..errors import InvalidArgumentError, StepFailedError
 from ..geometry.cells import Cells
-from ..geometry.contacts import (
-    KIND_BITS,
-    Contacts,
-    concatenate,
-    contact_keys,
-    evaluate_contacts,
-    relative_normal_velocity,
-    select_contacts,
-)
-from ..geometry.motion import left_jacobian, move, rotate, turning_vectors
-from ..geometry.regions import ONE, Split
-from ..geometry.surfaces import Plane, evaluate_plane_contacts, plane_contacts
+from ..geometry.contacts import Contacts, relative_normal_velocity
+from ..geometry.motion import left_jacobian, move, turning_vectors
+from ..geometry.regions import Split
+from ..geometry.surfaces import Plane
 from ..resolve.resolve import acceptance_failure
 from ..schema import check_fields, documented, setting
 from ..solvers import Problem, SolverSpec, get_solver, solve
+from .records import CellMotion, ContactImpulses, PositionStepResult
+from .tracking import Floors, Tracked, diameters, evaluate, first_pairs, start_floors, track
 
 __all__ = ["CellMotion", "ContactImpulses", "PositionSettings", "PositionStepResult", "move", "position_step"]
 
@@ -110,7 +104,8 @@ class PositionSettings:
     aim: float = setting(
         0.0, unit="fraction of the pair's diameter", at_least=0,
         help="the smallest gap the linearizations aim at beyond each contact's target (contacts rest at it, as if "
-             "the cells were this much thicker: 0.03 made a 2D colony 2.5 % less packed than 0.01, docs/model-notes.md); "
+             "the cells were this much thicker: at 0.03 a 2D colony of 5,000 cells packed at 0.86, at 0.01 at 0.88, "
+             "at 0 at 0.89, docs/model-notes.md); "
              "where a linearization over-predicted a contact's separation, the next aims at that error instead")
     trust_rounds: int = setting(
         2, unit="linearizations", at_least=0,
@@ -136,280 +131,6 @@ class PositionSettings:
     def bounded(self) -> bool:
         """The step bounds the unknowns (turning or shrinking)."""
         return self.turn_limit is not None or self.trust is not None or not self.allow_shrinking
-
-
-@dataclass(frozen=True)
-class ContactImpulses:
-    """Contact impulses of a step keyed by cell ids and contact kind: the warm start of the next
-    step (:func:`position_step`'s ``warm``), matched contact by contact whatever the cells'
-    order.
-
-    Attributes:
-        a: (K,) id of cell a.
-        b: (K,) id of cell b, or ``-1 - j`` for plane ``j``.
-        kind: (K,) contact kind (:class:`qpcontact.geometry.Contacts`).
-        impulse: (K,) normal impulse [momentum].
-    """
-
-    a: np.ndarray
-    b: np.ndarray
-    kind: np.ndarray
-    impulse: np.ndarray
-
-    @classmethod
-    def empty(cls) -> ContactImpulses:
-        none = np.zeros(0, dtype=np.int64)
-        return cls(none, none.copy(), none.copy(), np.zeros(0))
-
-    def lookup(self, a: np.ndarray, b: np.ndarray, kind: np.ndarray) -> np.ndarray:
-        """The impulse of each contact ``(a[i], b[i], kind[i])``; 0 where there is none."""
-        if self.impulse.size == 0 or a.size == 0:
-            return np.zeros(a.size)
-        span = 1 + max(int(np.max(self.a)), int(np.max(a)), int(np.max(np.abs(self.b))), int(np.max(np.abs(b))))
-        reference = contact_keys(self.a, self.b, self.kind, span)
-        order = np.argsort(reference)
-        reference, values = reference[order], self.impulse[order]
-        query = contact_keys(a, b, kind, span)
-        where = np.minimum(np.searchsorted(reference, query), reference.size - 1)
-        return np.where(reference[where] == query, values[where], 0.0)
-
-
-@dataclass(frozen=True)
-class CellMotion:
-    """Each cell's velocity over a step, keyed by cell id: the predictor of where the next step
-    will take the cells, so that its first linearization already holds the contacts that the
-    motion will make (:func:`position_step`'s ``motion``).
-
-    A colony's flow changes little from one step to the next, while a cell can move a diameter
-    relative to a neighbour in a step (a cell pushed out of a jam): searching for contacts only
-    around the free motion (growth in place) missed such pairs, and a second linearization was
-    needed to catch them (on grown 2D colonies of 5,000–10⁴ cells, overlaps of 0.26–0.47 of a
-    diameter after the first; docs/model-notes.md).
-
-    Attributes:
-        ids: (M,) cell ids.
-        velocity: (M, 3) the velocity of each cell's centre over the step [length/time].
-        turning: (M, 3) its rotation vector per unit time [rad/time].
-    """
-
-    ids: np.ndarray
-    velocity: np.ndarray
-    turning: np.ndarray
-
-    @classmethod
-    def empty(cls) -> CellMotion:
-        return cls(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
-
-    @classmethod
-    def of(cls, start: Cells, end: Cells, ids: np.ndarray, dt: float, drive_and_impulses: np.ndarray) -> CellMotion:
-        """The motion of a step from ``start`` to ``end`` with these momenta."""
-        return cls(np.asarray(ids, dtype=np.int64).copy(), (end.centers - start.centers) / dt,
-                   turning_vectors(start, dt, drive_and_impulses) / dt)
-
-    def velocities(self, ids: np.ndarray, parents: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """(N, 3) velocities and (N, 3) turning rates of the cells with these ids (or their
-        parents' ids); 0 for unknown ids."""
-        if self.ids.size == 0:
-            return np.zeros((len(ids), 3)), np.zeros((len(ids), 3))
-        order = np.argsort(self.ids)
-        known = self.ids[order]
-
-        def index_of(query: np.ndarray) -> np.ndarray:
-            where = np.minimum(np.searchsorted(known, query), known.size - 1)
-            return np.where(known[where] == query, order[where], -1)
-
-        row = index_of(np.asarray(ids, dtype=np.int64))
-        if parents is not None:
-            row = np.where(row >= 0, row, index_of(np.asarray(parents, dtype=np.int64)))
-        moving = (row >= 0)[:, None]
-        return (np.where(moving, self.velocity[np.maximum(row, 0)], 0.0),
-                np.where(moving, self.turning[np.maximum(row, 0)], 0.0))
-
-    def predict(self, cells: Cells, ids: np.ndarray, dt: float, parents: np.ndarray | None = None) -> Cells:
-        """``cells`` moved by ``dt`` with the motion of their ids (or of their parents' ids, for
-        cells born since: daughters move with their mother); cells of unknown ids stay."""
-        if self.ids.size == 0 or cells.n == 0:
-            return cells
-        velocity, turning = self.velocities(ids, parents)
-        return cells.replace(centers=cells.centers + velocity * dt, axes=rotate(cells.axes, turning * dt))
-
-
-@dataclass
-class PositionStepResult:
-    """The outcome of one :func:`position_step`.
-
-    Attributes:
-        cells: the state at ``t + dt``; its momenta are ``drive + impulses`` (the momenta that
-            moved the cells over the step, a predictor for the next one).
-        impulses: (N, 7) contact impulses ``x`` ``(Δp, ΔL, Δg)`` [momentum units].
-        converged: every contact met its target to within the overlap tolerance.
-        iterations: linearizations made.
-        contacts: the contacts at the end positions (every contact kept during the step).
-        contact_impulses: (K,) normal impulse of each of those contacts in the last solve
-            [momentum] (0 for contacts that entered after it).
-        overlaps: largest overlap (fraction of the pair's diameter) at each iteration's
-            positions, the last one being the end of the step.
-        start_overlap: largest overlap at the start of the step.
-        max_overlap: largest overlap at the end of the step.
-        excess: largest shortfall of a contact below its target at the end, as a fraction of the
-            pair's diameter (≤ ``overlap_tolerance`` when converged).
-        times: seconds spent in ``detect``, ``assemble``, ``solve`` and in ``total``.
-        solver_iterations: the solver's iterations, summed over the step.
-        message: why the step did not converge, if it did not.
-        warm: the contact impulses keyed by cell ids (``ids`` of :func:`position_step`), the warm
-            start of the next step.
-        turn_limited: cells whose turning sat on a bound (the step's limit or the iteration's
-            trust region) in the last solve.
-        motion: each cell's motion over the step, keyed by ``ids``: the predictor of the next
-            step (its ``motion``).
-    """
-
-    cells: Cells
-    impulses: np.ndarray
-    converged: bool
-    iterations: int
-    contacts: Contacts
-    contact_impulses: np.ndarray
-    overlaps: list[float]
-    start_overlap: float
-    max_overlap: float
-    excess: float
-    times: dict[str, float] = field(default_factory=dict)
-    solver_iterations: int = 0
-    message: str = ""
-    warm: ContactImpulses = field(default_factory=ContactImpulses.empty)
-    turn_limited: int = 0
-    motion: CellMotion = field(default_factory=CellMotion.empty)
-
-    @property
-    def contact_forces(self) -> np.ndarray:
-        """(K,) normal force of each contact of :attr:`contacts` over the step, ``≥ 0`` (a push),
-        in the units in which the drive is a force.
-
-        The step is overdamped: a cell moves by ``dt·W·(drive + impulses)``, so its "mass" ``m``
-        is a drag coefficient (velocity = ``p/m``) and the drive ``p`` is a force [mass·length/
-        time in the library's labels; with ``qpcontact simulate``'s masses = volumes, a free cell
-        of volume V [µm³] driven by f moves at f/V µm per doubling time]. The contact
-        "impulses" enter the motion exactly as the drive does, so they are these forces: a cell
-        held still against a wall by a drive f carries f at that contact, and the force on cell
-        a of contact k is ``contact_forces[k]·normal[k]`` at ``offset_a[k]`` (minus that on b).
-
-        They are :attr:`contact_impulses`, the last solve's multipliers: they balance
-        ``impulses`` (the momenta the cells moved with) when that solve's answer was applied in
-        full, which is every step except those whose last linearization was damped or
-        backtracked. A step that needed no solve (the free motion was within the overlap
-        tolerance, e.g. a drive too weak to move a cell by 0.02 diameters against its
-        neighbour) reports no force; contacts first found after the last solve report 0.
-        Where contacts are redundant (statically indeterminate: two rods side by side keep the
-        closest points and both ends; loops of a jammed packing) the split of a load between
-        them is the solver's pick; the net force and torque on each cell are determined (they
-        are the step's ``impulses``).
-        """
-        return self.contact_impulses
-
-
-# ---------------------------------------------------------------------------------------------
-# The contacts of a step: found at the moved positions, kept for the rest of the step
-# ---------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class _Tracked:
-    """Contacts kept during a step: cells ``a``, ``b`` (``-1 - j`` for plane ``j``) and contact
-    kind (:class:`qpcontact.geometry.Contacts`), with their keys (:func:`contact_keys`)."""
-
-    a: np.ndarray
-    b: np.ndarray
-    kind: np.ndarray
-    keys: np.ndarray
-
-    @classmethod
-    def of(cls, a: np.ndarray, b: np.ndarray, kind: np.ndarray, span: int) -> _Tracked:
-        """The contacts ``(a, b, kind)``, each once (in the order of their keys)."""
-        keys, first = np.unique(contact_keys(a, b, kind, span), return_index=True)
-        return cls(a[first], b[first], kind[first], keys)
-
-    def keyed(self, ids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``(a, b)`` with cells as their ids (planes stay ``-1 - j``): the contacts as
-        :class:`ContactImpulses` keys them."""
-        return ids[self.a], np.where(self.b >= 0, ids[np.maximum(self.b, 0)], self.b)
-
-    def union(self, other: _Tracked, span: int) -> _Tracked:
-        return _Tracked.of(np.concatenate([self.a, other.a]), np.concatenate([self.b, other.b]),
-                           np.concatenate([self.kind, other.kind]), span)
-
-
-def _detect(cells: Cells, planes: Sequence[Plane], reach: float, span: int, pairs: np.ndarray | None = None,
-            split: Split = ONE) -> _Tracked:
-    """Every contact within ``reach`` [length] of the cells as they are (the closest points of
-    every pair, whatever its ends: across the linearizations the closest point moves along the
-    pair, and only kind 0 follows it; docs/model-notes.md), among the candidate ``pairs`` when
-    given (a superset of the pairs within reach, :func:`_first_pairs`); the search and the narrow
-    phase shared among the processes of ``split``."""
-    if pairs is None:
-        pairs = split.candidate_pairs(cells, reach)
-    else:  # a superset for several configurations: the pairs whose enclosing spheres are within reach here
-        i, j = pairs[:, 0], pairs[:, 1]
-        apart = cells.centers[i] - cells.centers[j]
-        within = 0.5 * (cells.lengths[i] + cells.lengths[j]) + cells.radii[i] + cells.radii[j] + reach
-        pairs = pairs[np.einsum("ij,ij->i", apart, apart) <= within * within]
-    parts = split.gather(select_contacts(cells, pairs[split.share(len(pairs))], reach, always_closest=True))
-    for index, plane in enumerate(planes):
-        found = plane_contacts(cells, [plane], reach)
-        parts.append((found.cell_a, np.full(len(found), -1 - index), found.kind))
-    a, b, kind = (np.concatenate(x) for x in zip(*parts, strict=True))
-    return _Tracked.of(a, b, kind, span)
-
-
-def _evaluate(cells: Cells, found: _Tracked, planes: Sequence[Plane], planar: bool, split: Split = ONE) -> Contacts:
-    """The contacts of ``found`` at the cells' present positions, in the order of ``found``
-    (their geometry: the normal velocities are left 0, :func:`_result` gives the last ones theirs),
-    the pairs shared among the processes of ``split`` (each evaluates a contiguous part)."""
-    pairwise = np.flatnonzero(found.b >= 0)
-    mine = pairwise[split.share(pairwise.size)]
-    parts = split.gather(evaluate_contacts(cells, found.a[mine], found.b[mine], found.kind[mine], planar=planar,
-                                           velocities=False))
-    order = [pairwise]
-    for j, plane in enumerate(planes):
-        on = np.flatnonzero(found.b == -1 - j)
-        parts.append(evaluate_plane_contacts(cells, plane, found.a[on], found.kind[on]))
-        order.append(on)
-    return concatenate(parts).subset(np.argsort(np.concatenate(order), kind="stable"))
-
-
-def _diameters(cells: Cells, contacts: Contacts) -> np.ndarray:
-    """(K,) ``ρ_a + ρ_b`` (``2ρ_a`` against a plane)."""
-    rho_a = cells.radii[contacts.cell_a]
-    return rho_a + np.where(contacts.cell_b >= 0, cells.radii[np.maximum(contacts.cell_b, 0)], rho_a)
-
-
-@dataclass(frozen=True)
-class _Floors:
-    """Overlap present at the start of the step sets the floor of its own pair's target:
-    ``min(0, d_start + relaxation·(ρ_a + ρ_b))``, per pair key (:data:`KIND_BITS` dropped)."""
-
-    pairs: np.ndarray
-    values: np.ndarray
-
-    def targets(self, found: _Tracked) -> np.ndarray:
-        """(K,) the target separation of each contact of ``found`` [length]."""
-        if self.pairs.size == 0:
-            return np.zeros(found.keys.size)
-        pair = found.keys >> KIND_BITS
-        where = np.minimum(np.searchsorted(self.pairs, pair), self.pairs.size - 1)
-        return np.where(self.pairs[where] == pair, np.minimum(0.0, self.values[where]), 0.0)
-
-
-def _start(cells: Cells, planes: Sequence[Plane], planar: bool, span: int,
-           settings: PositionSettings, pairs: np.ndarray, split: Split = ONE) -> tuple[_Floors, float]:
-    """The floors of the targets and the largest overlap at the start of the step (among the
-    candidate ``pairs``, a superset of the touching ones)."""
-    found = _detect(cells, planes, 0.0, span, pairs, split)
-    start = _evaluate(cells, found, planes, planar, split)
-    diameter = _diameters(cells, start)
-    overlapping = start.separation < 0
-    pairs = found.keys[overlapping] >> KIND_BITS
-    values = start.separation[overlapping] + settings.relaxation * diameter[overlapping]
-    order = np.argsort(pairs)
-    return _Floors(pairs[order], values[order]), float(np.max(-start.separation / diameter, initial=0.0))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -482,7 +203,7 @@ def _aims(progress: _Progress, contacts: Contacts, diameter: np.ndarray, setting
     diameters, or as much as the last linearization over-predicted that contact's separation
     (its error, up to :data:`MAX_AIM` diameters), whichever is larger. A contact rests at its
     aim: a gap kept everywhere (0.03 of a diameter until 2026-12) made the cells that much
-    thicker, and a 2D colony 2.5 % less packed than at 0.01 (docs/model-notes.md); an aim where
+    thicker: a 2D colony of 5,000 cells packed at 0.86 against 0.89 at 0 (docs/model-notes.md); an aim where
     the linearization erred (a cell turning fast) lasts as long as the error."""
     aim = settings.aim * diameter
     if progress.predicted is None or len(contacts) == 0:
@@ -547,7 +268,7 @@ class _Progress:
     """What the linearizations of a step carry from one to the next."""
 
     impulses: np.ndarray
-    found: _Tracked
+    found: Tracked
     previous: np.ndarray | None = None  # the impulses of the last kept iterate
     relaxation: float = 1.0  # the fraction of each update taken
     backtracks: int = 0
@@ -639,53 +360,6 @@ def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known:
     return False
 
 
-def _track(found: _Tracked, now: Cells, predicted: Cells | None, planes: Sequence[Plane], reach: float,
-           span: int, pairs: np.ndarray | None = None, split: Split = ONE) -> _Tracked:
-    """The contacts kept so far and those within ``reach`` of the cells where they are now (and,
-    at the first linearization, where the last step's motion would take them, ``predicted``),
-    among the candidate ``pairs`` when given (the first linearization's, :func:`_first_pairs`).
-
-    Every linearization searches the whole margin: a cell pushed out of a jam can move a diameter
-    against a neighbour within one linearization (measured on a grown colony of 10⁴ cells, with
-    half the margin after the first: 0.14 of a diameter of overlap at the seventh linearization,
-    with a pair found only then)."""
-    found = found.union(_detect(now, planes, reach, span, pairs, split), span)
-    return found if predicted is None else found.union(_detect(predicted, planes, reach, span, pairs, split), span)
-
-
-def _tip_displacement(start: Cells, end: Cells) -> np.ndarray:
-    """(N,) the largest displacement of a point of each cell's axis between two configurations
-    [length]: that of one of its tips (a point of the axis moves by an affine mix of the two)."""
-    half_start, half_end = 0.5 * start.lengths[:, None], 0.5 * end.lengths[:, None]
-    moved = end.centers - start.centers
-    plus = moved + half_end * end.axes - half_start * start.axes
-    minus = moved - half_end * end.axes + half_start * start.axes
-    return np.sqrt(np.maximum(np.einsum("ij,ij->i", plus, plus), np.einsum("ij,ij->i", minus, minus)))
-
-
-def _first_pairs(cells: Cells, now: Cells, predicted: Cells | None, reach: float, split: Split = ONE) -> np.ndarray:
-    """One broad phase for the start of the step and its first linearization: the candidate
-    pairs of the cells at the start, each cell's reach widened by how far its axis moves to the
-    first linearization's positions ``now`` (the free motion) and to ``predicted``. The start's
-    overlaps and the first linearization's contacts are then found among them (a broad phase is
-    2/3 of a detection; three were made at 10⁴ cells, 2026-12-04).
-
-    Where the step moves many cells further than the search's reach (a large step of a fast
-    colony: the edge of a 2D colony of 5,000 cells moves microns in a step of 0.2 growth), the
-    widened reach would take in every neighbour of a moving region (2.4·10⁶ candidate pairs,
-    ``TooManyContactsError``, 2026-12-04): each configuration is then searched on its own and the
-    pairs put together, which bounds them by those of a packing."""
-    slack = _tip_displacement(cells, now)
-    if predicted is not None:
-        slack = np.maximum(slack, _tip_displacement(cells, predicted))
-    if slack.size == 0 or float(np.quantile(slack, 0.99)) <= reach:
-        return split.candidate_pairs(cells, reach, slack)
-    pairs = [split.candidate_pairs(c, reach) for c in (cells, now, predicted) if c is not None]
-    n = np.int64(max(cells.n, 1))
-    key = np.unique(np.concatenate([p[:, 0].astype(np.int64) * n + p[:, 1] for p in pairs]))
-    return np.column_stack([key // n, key % n]).astype(np.intp)
-
-
 def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np.ndarray, separation: np.ndarray,
            dt: float, spec: SolverSpec, form: str, settings: PositionSettings, ids: np.ndarray, times: dict[str, float], comm: Any = None) -> str:
     """Solve one linearization's QP and take its answer into ``progress``; why not, if it was
@@ -752,7 +426,7 @@ def position_step(
 ) -> PositionStepResult:
     """Advance overdamped cells by ``dt`` with non-penetration at the end of the step (module
     docstring). The phases of each linearization: move the cells (:func:`move`), find and
-    evaluate the contacts (:func:`_track`, :func:`_evaluate`), judge the iterate (:func:`_judge`:
+    evaluate the contacts (:func:`track`, :func:`evaluate`), judge the iterate (:func:`_judge`:
     backtracked, damped; converged), build its QP (:func:`_linearize`), solve it and take the
     answer (:func:`_solve`); then the result (:func:`_result`).
 
@@ -795,67 +469,111 @@ def position_step(
                                                           motion, parents, on_failure)
     if comm is not None and spec.name != "ipm-petsc":
         raise InvalidArgumentError(f"comm: only the solver ipm-petsc splits a step among processes; got {spec.name!r}")
-    n, span = cells.n, cells.n + len(planes) + 1
-    form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
-    times = {"detect": 0.0, "assemble": 0.0, "solve": 0.0}
-    t_start = t0 = time.perf_counter()
-    reach = search_margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if n else 0.0
-    free = move(cells, dt, drive)
-    predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
-    split = Split(comm)
-    first_pairs = _first_pairs(cells, free, predicted, reach, split)
-    floors, start_overlap = _start(cells, planes, planar, span, settings, first_pairs, split)
-    times["detect"] += time.perf_counter() - t0
-    empty = np.zeros(0, dtype=np.intp)
-    progress = _Progress(impulses=np.zeros((n, 7)), found=_Tracked(empty, empty, empty, empty.astype(np.int64)),
-                         last=ContactImpulses.empty() if warm is None else warm, turned=np.zeros((n, 3)),
-                         radius=None if settings.trust is None else np.full(n, settings.trust))
+    step, start_overlap = _begin(cells, dt, drive, planes, planar, settings, spec, ids, motion, parents, comm)
+    progress = _Progress(impulses=np.zeros((cells.n, 7)), found=Tracked.empty(),
+                         last=ContactImpulses.empty() if warm is None else warm, turned=np.zeros((cells.n, 3)),
+                         radius=None if settings.trust is None else np.full(cells.n, settings.trust))
     converged, message, iteration, excess = False, "", 0, 0.0
     for iteration in range(settings.max_iterations + 1):
-        now = move(cells, dt, drive + progress.impulses)
-        t0 = time.perf_counter()
-        known = progress.found.keys
-        progress.found = (_track(progress.found, now, predicted, planes, reach, span, first_pairs, split)
-                          if iteration == 0 else _track(progress.found, now, None, planes, reach, span, None, split))
-        contacts = _evaluate(now, progress.found, planes, planar, split)
-        diameter = _diameters(now, contacts)
-        times["detect"] += time.perf_counter() - t0
-        if _judge(progress, contacts, diameter, known, iteration, settings):
+        now, contacts, diameter, backtracked = _look(step, progress, iteration)
+        if backtracked:
             continue
-        target = floors.targets(progress.found)
+        target = step.floors.targets(progress.found)
         excess = float(np.max((target - contacts.separation) / diameter, initial=0.0))
-        # The free motion itself may be within the tolerance (nothing pushes): nothing to solve
-        # (and a solve would be ill-posed: its right-hand side, the scale of the problem, is ~0).
-        # A cell whose turn the trust region stopped would have turned further: not done yet.
-        if excess <= settings.overlap_tolerance:
-            if progress.trusting == 0 or progress.trust_rounds >= settings.trust_rounds:
-                converged = True
-                break
-            progress.trust_rounds += 1
-        if iteration == settings.max_iterations:
-            message = (f"largest overlap beyond its target {excess:.3g} of a diameter after {iteration} "
-                       f"linearizations (tolerance {settings.overlap_tolerance:g})" if excess > settings.overlap_tolerance
-                       else f"{progress.trusting} cells still turning at the trust region's edge after {iteration} "
-                       f"linearizations (trust {settings.trust:g} diameters)")
+        converged, message = _verdict(progress, excess, iteration, settings)
+        if converged or message:
             break
         t0 = time.perf_counter()
         linear = _linearize(cells, now, contacts, target, _aims(progress, contacts, diameter, settings), dt, drive,
                             progress.impulses, planar, settings, progress.radius)
-        times["assemble"] += time.perf_counter() - t0
+        step.times["assemble"] += time.perf_counter() - t0
         if linear is None:  # nothing asks for a push: the free motion is the answer
-            progress.impulses, progress.last, progress.trusting = np.zeros((n, 7)), ContactImpulses.empty(), 0
+            progress.impulses, progress.last, progress.trusting = np.zeros((cells.n, 7)), ContactImpulses.empty(), 0
             continue
-        message = _solve(progress, *linear, contacts.separation, dt, spec, form, settings, ids, times, comm)
+        message = _solve(progress, *linear, contacts.separation, dt, spec, step.form, settings, ids, step.times, comm)
         if message:
             message = f"{settings.solver} failed at linearization {iteration}: {message}"
             break
     # The loop always ends on a detection at the positions of the impulses it kept.
-    times["total"] = time.perf_counter() - t_start
+    step.times["total"] = time.perf_counter() - step.started
     result = _result(progress, cells, now, contacts, diameter, converged, iteration, excess, start_overlap, ids, dt,
-                     drive, message, times)
+                     drive, message, step.times)
     if not converged and on_failure == "raise":
         raise StepFailedError(f"position step did not converge: {message}; {what_to_try(settings)}", result)
     return result
+
+
+@dataclass
+class _Step:
+    """What every linearization of one step shares: the scene, the search and the start's floors."""
+
+    cells: Cells
+    dt: float
+    drive: np.ndarray
+    settings: PositionSettings
+    planes: list[Plane]
+    planar: bool
+    form: str
+    reach: float
+    span: int
+    split: Split
+    predicted: Cells | None
+    candidates: np.ndarray
+    floors: Floors
+    times: dict[str, float]
+    started: float
+
+
+def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], planar: bool, settings: PositionSettings,
+           spec: SolverSpec, ids: np.ndarray, motion: CellMotion | None, parents: np.ndarray | None,
+           comm: Any) -> tuple[_Step, float]:
+    """The step's set-up: the search's reach, the free motion and the prediction, one broad phase
+    for both and the start (:func:`first_pairs`), the floors of the pairs that start overlapping;
+    ``(step, start_overlap)``."""
+    started = time.perf_counter()
+    form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
+    reach = search_margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if cells.n else 0.0
+    free = move(cells, dt, drive)
+    predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
+    split, span = Split(comm), cells.n + len(planes) + 1
+    candidates = first_pairs(cells, free, predicted, reach, split)
+    floors, start_overlap = start_floors(cells, planes, planar, span, settings.relaxation, candidates, split)
+    times = {"detect": time.perf_counter() - started, "assemble": 0.0, "solve": 0.0}
+    return _Step(cells, dt, drive, settings, planes, planar, form, reach, span, split, predicted, candidates, floors, times,
+                 started), start_overlap
+
+
+def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Contacts, np.ndarray, bool]:
+    """Move the cells with the impulses so far, find and evaluate the contacts there and judge
+    the iterate (:func:`_judge`); ``(now, contacts, diameter, backtracked)``."""
+    now = move(step.cells, step.dt, step.drive + progress.impulses)
+    t0 = time.perf_counter()
+    known = progress.found.keys
+    first = iteration == 0  # the first linearization also searches where the last step's motion goes
+    progress.found = track(progress.found, now, step.predicted if first else None, step.planes, step.reach, step.span,
+                           step.candidates if first else None, step.split)
+    contacts = evaluate(now, progress.found, step.planes, step.planar, step.split)
+    diameter = diameters(now, contacts)
+    step.times["detect"] += time.perf_counter() - t0
+    return now, contacts, diameter, _judge(progress, contacts, diameter, known, iteration, step.settings)
+
+
+def _verdict(progress: _Progress, excess: float, iteration: int, settings: PositionSettings) -> tuple[bool, str]:
+    """Whether the step is done at this iterate: ``(converged, why it failed)``. The free motion
+    itself may be within the tolerance (nothing pushes: nothing to solve, and a solve would be
+    ill-posed, its right-hand side ~0); a cell whose turn sat on its trust region would have
+    turned further: up to ``trust_rounds`` more linearizations."""
+    if excess <= settings.overlap_tolerance:
+        if progress.trusting == 0 or progress.trust_rounds >= settings.trust_rounds:
+            return True, ""
+        progress.trust_rounds += 1
+    if iteration < settings.max_iterations:
+        return False, ""
+    if excess > settings.overlap_tolerance:
+        return False, (f"largest overlap beyond its target {excess:.3g} of a diameter after {iteration} "
+                       f"linearizations (tolerance {settings.overlap_tolerance:g})")
+    return False, (f"{progress.trusting} cells still turning at the trust region's edge after {iteration} "
+                   f"linearizations (trust {settings.trust:g} diameters)")
 
 
 def what_to_try(settings: PositionSettings) -> str:
