@@ -25,14 +25,23 @@ a new ``x``::
 
 which is the system of :func:`qpcontact.assembly.build_system` with that right-hand side. The
 step stops when every contact meets its target to within ``overlap_tolerance`` (measured with
-the true distance at the re-detected positions, not the linearization). Two bounds keep the
-linearization honest, both on the unknowns (so only solvers taking bounds can be used: the
-built-in ``"ipm"``, or a qpsolvers backend in the primal form):
+the true distance at the re-detected positions, not the linearization). What keeps the
+linearizations honest changes their number, not the physics (docs/model-notes.md, "The colony
+the physics makes"):
 
-- *turning*: no cell turns its tips by more than ``turn_limit`` of its diameter in a step, and by
-  no more than ``trust`` of that per iteration (a trust region: large turns of short cells are
-  where the linearization is poor);
-- *shrinking*: no cell gets shorter (growth can be compressed to zero, not reversed).
+- *trust regions*: in one linearization a cell's tips move by turning at most ``trust``
+  diameters from where the last one left them (turns are where a linearization is poor); a cell
+  whose answer sits on its region widens it and the step takes another linearization (up to
+  ``trust_rounds`` beyond meeting the tolerance), a cell whose turn goes back against its last
+  one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
+  diameters, the default until 2026-12, bent the colony);
+- *aims*: a linearization aims at a gap of ``aim`` beyond each target, or at the error the last
+  linearization made on that contact where that is larger, so that a contact the turning made
+  nonlinear is not missed again; contacts then rest touching, not at a gap;
+- *shrinking*: no cell gets shorter (growth can be compressed to zero, not reversed): the model.
+
+The bounds are on the unknowns, so only solvers taking bounds can be used (the built-in
+``"ipm"``, or a qpsolvers backend in the primal form).
 
 An iteration that makes the largest overlap grow on a contact it already knew halves the
 following updates (an SQP iterate can alternate between two states when a contact carries a
