@@ -35,9 +35,9 @@ the physics makes"):
   ``trust_rounds`` beyond meeting the tolerance), a cell whose turn goes back against its last
   one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
   diameters, the default until 2026-12, bent the colony);
-- *aims*: a linearization aims at a gap of ``aim`` beyond each target, or at the error the last
-  linearization made on that contact where that is larger, so that a contact the turning made
-  nonlinear is not missed again; contacts then rest touching, not at a gap;
+- *aim*: a linearization may aim at a gap of ``aim`` beyond each target, room for its own error;
+  contacts then rest at that gap, as if the cells were thicker, so the default is 0: contacts
+  rest touching, and a linearization that left an overlap is followed by another;
 - *shrinking*: no cell gets shorter (growth can be compressed to zero, not reversed): the model.
 
 The bounds are on the unknowns, so only solvers taking bounds can be used (the built-in
@@ -112,10 +112,9 @@ class PositionSettings:
         help="overlap present at the start of the step is removed by at most this much per step")
     aim: float = setting(
         0.0, unit="fraction of the pair's diameter", at_least=0,
-        help="the smallest gap the linearizations aim at beyond each contact's target (contacts rest at it, as if "
+        help="the gap the linearizations aim at beyond each contact's target, room for their error (contacts rest at it, as if "
              "the cells were this much thicker: at 0.03 a 2D colony of 5,000 cells packed at 0.86, at 0.01 at 0.88, "
-             "at 0 at 0.89, docs/model-notes.md); "
-             "where a linearization over-predicted a contact's separation, the next aims at that error instead")
+             "at 0 at 0.89, docs/model-notes.md)")
     trust_rounds: int = setting(
         2, unit="linearizations", at_least=0,
         help="linearizations a step takes beyond meeting the overlap tolerance while some cell's turn sits on its "
@@ -207,23 +206,6 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
     return system, Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper), cap
 
 
-def _aims(progress: _Progress, contacts: Contacts, diameter: np.ndarray, settings: PositionSettings) -> np.ndarray:
-    """(K,) the gap each contact's linearization aims at beyond its target [length]: ``aim``
-    diameters, or as much as the last linearization over-predicted that contact's separation
-    (its error, up to :data:`MAX_AIM` diameters), whichever is larger. A contact rests at its
-    aim: a gap kept everywhere (0.03 of a diameter until 2026-12) made the cells that much
-    thicker: a 2D colony of 5,000 cells packed at 0.86 against 0.89 at 0 (docs/model-notes.md); an aim where
-    the linearization erred (a cell turning fast) lasts as long as the error."""
-    aim = settings.aim * diameter
-    if progress.predicted is None or len(contacts) == 0:
-        return aim
-    keys, separation = progress.predicted
-    where = np.minimum(np.searchsorted(keys, progress.found.keys), max(keys.size - 1, 0))
-    known = keys[where] == progress.found.keys if keys.size else np.zeros(len(contacts), dtype=bool)
-    error = np.where(known, separation[where] - contacts.separation, 0.0)
-    return np.maximum(aim, np.minimum(error, MAX_AIM * diameter))
-
-
 def _turn_limited(system: ContactSystem, problem: Problem, cap: np.ndarray, y: np.ndarray) -> tuple[int, np.ndarray]:
     """Cells whose turning sits on a bound in the answer ``y``: how many on any bound, and which
     on their trust region (a bound that is not the step's ``cap``): those would have turned
@@ -268,8 +250,6 @@ MAX_BACKTRACKS = 6
 #: A cell's trust region widens, linearization after linearization, to at most this many times
 #: ``PositionSettings.trust``.
 MAX_TRUST_GROWTH = 8.0
-#: The largest gap a contact's linearization aims at for the error of the last one [diameters].
-MAX_AIM = 0.1
 
 
 @dataclass
@@ -287,8 +267,6 @@ class _Progress:
     turn_limited: int = 0
     trusting: int = 0  # cells whose turn sat on the trust region in the last solve (and could go further)
     radius: np.ndarray | None = None  # (N,) each cell's trust region [diameters]
-    # each contact's separation as the last linearization predicted it, by key: (keys, separation [length])
-    predicted: tuple[np.ndarray, np.ndarray] | None = None
     trust_rounds: int = 0  # linearizations taken at feasible positions for cells on their trust region
     turned: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (N, 3) the change of each cell's angular impulse in the last solve
 
@@ -362,15 +340,14 @@ def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known:
             and progress.backtracks < MAX_BACKTRACKS and iteration < settings.max_iterations):
         progress.impulses = progress.previous + 0.5 * (progress.impulses - progress.previous)
         progress.backtracks += 1
-        progress.predicted = None  # it predicted the full update
         progress.relaxation = 0.5
         overlaps.pop()
         return True
     return False
 
 
-def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np.ndarray, separation: np.ndarray,
-           dt: float, spec: SolverSpec, form: str, settings: PositionSettings, ids: np.ndarray, times: dict[str, float], comm: Any = None) -> str:
+def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np.ndarray, spec: SolverSpec,
+           form: str, settings: PositionSettings, ids: np.ndarray, times: dict[str, float], comm: Any = None) -> str:
     """Solve one linearization's QP and take its answer into ``progress``; why not, if it was
     not taken. An answer is taken only when its solver stands by it and it passes the acceptance
     checks of every answer (resolve's, with the bounds): a stalled answer within the acceptance
@@ -393,8 +370,6 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np
     progress.previous = progress.impulses
     progress.impulses = progress.impulses + progress.relaxation * (system.to_impulses(out.y) - progress.impulses)
     _adapt_trust(progress, progress.previous, trusting, settings)
-    moved = system.velocity_changes(progress.impulses) - system.velocity_changes(progress.previous)
-    progress.predicted = (progress.found.keys, separation + dt * moved)
     return ""
 
 
@@ -493,13 +468,13 @@ def position_step(
         if converged or message:
             break
         t0 = time.perf_counter()
-        linear = _linearize(cells, now, contacts, target, _aims(progress, contacts, diameter, settings), dt, drive,
+        linear = _linearize(cells, now, contacts, target, settings.aim * diameter, dt, drive,
                             progress.impulses, planar, settings, progress.radius)
         step.times["assemble"] += time.perf_counter() - t0
         if linear is None:  # nothing asks for a push: the free motion is the answer
             progress.impulses, progress.last, progress.trusting = np.zeros((cells.n, 7)), ContactImpulses.empty(), 0
             continue
-        message = _solve(progress, *linear, contacts.separation, dt, spec, step.form, settings, ids, step.times, comm)
+        message = _solve(progress, *linear, spec, step.form, settings, ids, step.times, comm)
         if message:
             message = f"{settings.solver} failed at linearization {iteration}: {message}"
             break
