@@ -254,5 +254,5 @@ def load_hook(path: str | Path) -> Hook:
     if divided is not None:
         if not callable(divided):
             raise InvalidArgumentError(f"model {path}: divided is not a function divided(before, after, born)")
-        hook.divided = divided  # type: ignore[attr-defined]
+        hook.divided = divided
     return hook

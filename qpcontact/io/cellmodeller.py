@@ -135,6 +135,8 @@ _NUMPY = _numpy_builders()
 #: (module, name) -> what the unpickler builds for it: nothing else is built.
 ALLOWED: dict[tuple[str, str], Any] = {
     ("CellModeller.CellState", "CellState"): CellState,
+    # the pickles qpcontact cellmodeller writes (qpcontact.cellmodeller.pickles)
+    ("qpcontact.cellmodeller.state", "CellState"): CellState,
     ("numpy", "ndarray"): np.ndarray,
     ("numpy", "dtype"): np.dtype,
     **{(f"numpy.{core}.multiarray", name): _NUMPY[name] for core in ("core", "_core") for name in ("_reconstruct", "scalar")},

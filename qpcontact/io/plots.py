@@ -140,11 +140,14 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     coloured by axis orientation in the xy-plane (0–180°), or by ``values`` (one number per
     cell, e.g. :func:`qpcontact.cell_pressure`; colour bar labelled ``value_label``, with its
     units: :func:`pressure_label`; with ``discrete``, integers >= 0 such as cell types, one
-    colour each), with the planes seen edge-on."""
+    colour each; an (N, 3) array: each cell's own RGB colour in [0, 1], as a CellModeller
+    model's ``color``, no colour bar), with the planes seen edge-on."""
     i, j, k = VIEWS[view]
     # Cells farther from the viewer are drawn first: the top layer of a 3D biofilm from above,
     # the front row (small y) from the side.
     order = np.argsort(cells.centers[:, k] if view == "top" else -cells.centers[:, k], kind="stable")
+    if values is not None and not discrete and np.shape(values) == (cells.n, 3):
+        return _draw_rgb(ax, cells, np.asarray(values, dtype=float), order, view, planes, length_unit, title)
     edges = 0.2
     cmap: str | Colormap
     if values is not None and discrete:
@@ -182,6 +185,24 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
         ax.set_title(title)
     if colorbar and ax.figure is not None:
         ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8, extend=_beyond(polys), ticks=_ticks(polys, discrete))
+    return polys
+
+
+def _draw_rgb(ax: Axes, cells: Cells, rgb: np.ndarray, order: np.ndarray, view: str, planes: Sequence[Any],
+              length_unit: str, title: str | None) -> PolyCollection:
+    """:func:`draw_colony` with each cell in its own RGB colour (clipped to [0, 1])."""
+    i, j, _ = VIEWS[view]
+    rgb = np.clip(np.nan_to_num(rgb), 0.0, 1.0)
+    polys = PolyCollection(list(capsule_outlines(cells, view)[order]), facecolors=rgb[order], edgecolors="k",
+                           linewidths=0.2 if cells.n <= 1000 else 0.0)
+    ax.add_collection(polys)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    draw_planes(ax, planes, view)
+    ax.set_xlabel(f"{'xyz'[i]} [{length_unit}]")
+    ax.set_ylabel(f"{'xyz'[j]} [{length_unit}]")
+    if title:
+        ax.set_title(title)
     return polys
 
 
