@@ -173,7 +173,7 @@ def draw(outcome: ModelRun) -> None:
                                     side_view=not outcome.model.planar, planes=outcome.model.planes, values=values))
     history = folder.read_history()
     if history["step"]:
-        folder.note(plot_history(folder.path / "history.png", history, describe(outcome)))
+        folder.note(plot_history(folder.path / "history.png", history, describe(outcome), time_unit="the model's time unit"))
 
 
 # ------------------------------------------------------------------------------------------

@@ -27,6 +27,7 @@ Lengths are labelled in µm and time in doubling times, the units of ``qpcontact
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -182,7 +183,7 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     ax.set_xlabel(f"{names[i]} [{length_unit}]")
     ax.set_ylabel(f"{names[j]} [{length_unit}]")
     if title:
-        ax.set_title(title)
+        ax.set_title(fit_title(title, 80))
     if colorbar and ax.figure is not None:
         ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8, extend=_beyond(polys), ticks=_ticks(polys, discrete))
     return polys
@@ -202,7 +203,7 @@ def _draw_rgb(ax: Axes, cells: Cells, rgb: np.ndarray, order: np.ndarray, view: 
     ax.set_xlabel(f"{'xyz'[i]} [{length_unit}]")
     ax.set_ylabel(f"{'xyz'[j]} [{length_unit}]")
     if title:
-        ax.set_title(title)
+        ax.set_title(fit_title(title, 80))
     return polys
 
 
@@ -253,7 +254,7 @@ def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None
     ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
     fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(fit_title(title, 95), fontsize=10)
     fig.savefig(path)
     return Path(path)
 
@@ -280,7 +281,7 @@ def pressure_profile_figure(cells: Cells, pressure: Any, *, title: str | None = 
     ax.axhline(0.0, color="0.3", lw=0.5)
     ax.legend(fontsize=8)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(fit_title(title, 80), fontsize=10)
     return fig
 
 
@@ -294,6 +295,12 @@ def plot_pressure_profile(path: str | Path, cells: Cells, pressure: Any, title: 
     pressure of ``qpcontact simulate``, :func:`pressure_label`)."""
     pressure_profile_figure(cells, pressure, title=title, bins=bins, label=label).savefig(path)
     return Path(path)
+
+
+def fit_title(title: str, width: int) -> str:
+    """``title`` with each of its lines wrapped at ``width`` characters (about the figure's
+    width at the title's font size), so that no title is clipped at the figure's edges."""
+    return "\n".join(textwrap.fill(line, width, break_on_hyphens=False) or line for line in title.splitlines())
 
 
 def positive(values: Sequence[float]) -> np.ndarray:
@@ -332,11 +339,12 @@ def history_figure(history: Mapping[str, Sequence[float]], title: str | None = N
         ax.set_xlabel(f"time [{time_unit}]")
     fig.supxlabel("steps without overlap, contacts or residual have no point on the log axes", fontsize=7, color="0.4")
     if title:
-        fig.suptitle(title)
+        fig.suptitle(fit_title(title, 110))
     return fig
 
 
-def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title: str | None = None) -> Path:
+def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title: str | None = None,
+                 time_unit: str = "doubling times") -> Path:
     """Four panels against simulated time: cell count; largest and mean overlap as a fraction
     of the diameter; solver time per step [s]; the velocity step's penetration and
     complementarity residuals (scaled), or, where the history has none (the position step, which
@@ -345,7 +353,7 @@ def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title
     ``mean_overlap``, ``solve_seconds`` and, optionally, ``penetration``, ``complementarity``,
     ``linearizations``, ``rejected``. Zeros (no overlap, no contact) are not drawn
     (:func:`positive`)."""
-    history_figure(history, title).savefig(path)
+    history_figure(history, title, time_unit).savefig(path)
     return Path(path)
 
 
