@@ -20,6 +20,7 @@ docs/cellmodeller.md is the guide: what maps onto what, and what differs.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ import numpy as np
 
 from ..arguments import output_folder, positive_float, positive_int, run_standalone
 from ..errors import InvalidArgumentError, ModelHookError, OutputFolderError
+from ..io.cellmodeller import CellModellerState, load_pickle, read_cellmodeller
 from ..io.runs import RunFolder, latest_snapshot
 from ..io.snapshots import Snapshot, load_snapshot
 from ..simulation.settings import ModelSettings, OutputSettings, RunSettings, Settings
@@ -85,7 +87,8 @@ def model_settings(model: Model, *, cells: int, steps: int | None, seed: int, sn
 
 def run_model(path: str | Path, *, cells: int = 2000, out: str | Path | None = None, steps: int | None = None,
               dt: float | None = None, seed: int = 1, resume: bool = False, overwrite: bool = False,
-              pickles: bool = True, vtk: bool = False, progress: bool = False) -> ModelRun:
+              pickles: bool = True, vtk: bool = False, progress: bool = False,
+              start: str | Path | None = None) -> ModelRun:
     """Run the CellModeller model script ``path`` on qpcontact's physics (module docstring).
 
     Args:
@@ -100,6 +103,10 @@ def run_model(path: str | Path, *, cells: int = 2000, out: str | Path | None = N
         pickles: write CellModeller-layout pickles (``out/pickles``).
         vtk: ParaView files with each snapshot.
         progress: a progress bar on stderr.
+        start: a CellModeller state to continue with the model (a ``step-NNNNN.pickle``, or a
+            run folder of them: its last), as CellModeller's own run would go on from it: its
+            cells, ids, lineage, types and numbers (``targetVol``, ``color``, ...), its step and
+            time; its ``dt`` unless ``dt`` is given.
 
     Raises:
         ModelRefused: (an InvalidArgumentError) the model uses what qpcontact does not run.
@@ -108,21 +115,44 @@ def run_model(path: str | Path, *, cells: int = 2000, out: str | Path | None = N
     """
     if resume and out is None:
         raise InvalidArgumentError("resume: needs the run folder (out)")
+    if resume and start is not None:
+        raise InvalidArgumentError("start and resume: give one (resume continues the run in out)")
+    state = None if start is None else read_cellmodeller(start, dt=dt)
     with serving():
-        model = load_model(path, seed=seed, dt=dt)
+        model = load_model(path, seed=seed, dt=dt if state is None else state.dt)
         settings = model_settings(model, cells=cells, steps=steps, seed=seed, vtk=vtk)
         snapshot, folder, writer = _open(model, settings, out, resume=resume, overwrite=overwrite, pickles=pickles)
         hook = ModelHook(model, seed=seed, pickles=writer, lineage=writer.lineage() if writer and snapshot else None)
-        start: Any = snapshot if snapshot is not None else hook.founders()
+        first: Any = snapshot if snapshot is not None else hook.founders()
+        if state is not None:
+            first = imported(hook, state)
         if folder is not None:
             folder.write_config(settings.to_tables(applying=True), f"qpcontact cellmodeller {model.path}: the run's "
                                 "settings (the model's own are in model.py)")
-        run = run_colony(settings, start=start, progress=progress, folder=folder, hook=hook, planes=model.planes)
+        run = run_colony(settings, start=first, progress=progress, folder=folder, hook=hook, planes=model.planes)
         hook.finish(run.colony, run.steps)
     outcome = ModelRun(run, model, settings, hook, folder, list(writer.written) if writer else [], list(model.notes))
     if folder is not None:
         draw(outcome)
     return outcome
+
+
+def imported(hook: ModelHook, state: CellModellerState) -> CellModellerState:
+    """A CellModeller state (:func:`qpcontact.io.cellmodeller.read_cellmodeller`) as the start of
+    the model's run: its ``growthRate`` among the cells' numbers, the whole lineage of its
+    pickle, and its cells' state already as the pickle's physics left it (the first step does
+    not update them again)."""
+    colony = state.colony
+    if colony.cells.is_monolayer() != hook.model.planar:
+        raise InvalidArgumentError(f"{state.path}: a {'2D' if colony.cells.is_monolayer() else '3D'} state, but the "
+                                   f"model is {'2D (jitter_z=False)' if hook.model.planar else '3D'}")
+    data = {**colony.cell_data, "growthRate": colony.rates.copy()}
+    hook.adopt(colony.replace(cell_data=data))
+    hook.synced = state.step
+    raw = load_pickle(state.path) if state.path is not None else {}
+    hook.lineage.update({int(k): int(v) for k, v in raw.get("lineage", {}).items()})
+    return dataclasses.replace(state, colony=hook.numbers(colony, [hook.states[int(i)] for i in colony.ids]),
+                               settings=None)
 
 
 def _open(model: Model, settings: Settings, out: str | Path | None, *, resume: bool, overwrite: bool,
@@ -198,6 +228,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=1, metavar="N",
                         help="seeds the model's random numbers (random, numpy.random) and the division jitter")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out from its latest snapshot")
+    parser.add_argument("--start", type=Path, metavar="PICKLE_OR_FOLDER",
+                        help="continue a CellModeller state (a step-NNNNN.pickle, or a run folder of them: its last) "
+                             "with the model, as CellModeller would: cells, ids, lineage, types, the model's numbers, "
+                             "step and time")
     parser.add_argument("--overwrite", action="store_true", help="replace the run already in --out")
     parser.add_argument("--no-pickles", action="store_true", help="write no CellModeller-layout pickles")
     parser.add_argument("--vtk", action="store_true", help="ParaView files with each snapshot (needs meshio)")
@@ -211,7 +245,7 @@ def run_command(args: argparse.Namespace) -> int:
         raise InvalidArgumentError(f"--seed: must be >= 0, got {args.seed}")
     outcome = run_model(args.model, cells=args.cells, out=args.out, steps=args.steps, dt=args.dt, seed=args.seed,
                         resume=args.resume, overwrite=args.overwrite, pickles=not args.no_pickles, vtk=args.vtk,
-                        progress=not args.quiet)
+                        progress=not args.quiet, start=args.start)
     run, folder = outcome.run, outcome.folder
     assert folder is not None
     for note in outcome.notes:

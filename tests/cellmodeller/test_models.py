@@ -16,7 +16,7 @@ import pytest
 from qpcontact.cellmodeller import ModelRefused, load_model, run_model
 from qpcontact.cli import main
 from qpcontact.errors import InvalidArgumentError
-from qpcontact.io.cellmodeller import read_cellmodeller
+from qpcontact.io.cellmodeller import load_pickle, read_cellmodeller
 
 MODELS = Path(__file__).parent / "models"
 
@@ -200,3 +200,25 @@ def test_command_line_run_and_max_cells(tmp_path, capsys):
     assert (tmp_path / "run" / "history.csv").exists()
     status = main(["cellmodeller", str(model), "--out", str(tmp_path / "run"), "--quiet"])
     assert status == 2 and "--overwrite" in capsys.readouterr().err
+
+
+def test_a_cellmodeller_state_continued_with_its_own_model(tmp_path):
+    """CellModeller's own pickle (tests/data/cellmodeller) continued with the model it holds."""
+    pickle_path = Path(__file__).parents[1] / "data" / "cellmodeller" / "ex1_simpleGrowth_seed1" / "step-00221.pickle"
+    state = read_cellmodeller(pickle_path)
+    source = load_pickle(pickle_path)["moduleStr"]  # (plain pickle.load would need CellModeller's classes)
+    model = tmp_path / "ex1_simpleGrowth.py"
+    model.write_text(source)
+    outcome = run_model(model, start=pickle_path, cells=80, out=tmp_path / "run")
+    run, hook = outcome.run, outcome.hook
+    assert run.first_step == 222 and run.colony.time == pytest.approx(0.025 * run.steps)
+    assert run.colony.cells.n >= 80 and not run.error
+    kept = set(state.colony.ids.tolist()) & set(run.colony.ids.tolist())
+    assert kept  # cells that have not divided since keep their ids and their targetVol
+    rows = {int(i): k for k, i in enumerate(state.colony.ids)}
+    for k, i in enumerate(run.colony.ids.tolist()):
+        if i in kept:
+            assert run.colony.cell_data["targetVol"][k] == state.colony.cell_data["targetVol"][rows[i]]
+    assert set(state.colony.parent_ids[state.colony.parent_ids >= 0].tolist()) <= set(hook.lineage.values())
+    assert np.all(run.colony.cells.lengths <= run.colony.cell_data["targetVol"] * 1.0251)
+    assert np.all(run.colony.cell_data["growthRate"] == 1.0)
