@@ -80,6 +80,9 @@ from .snapshots import Snapshot, npz_path, save_colony
 
 __all__ = ["CellModellerState", "CellState", "load_pickle", "read_cellmodeller", "run_pickles"]
 
+#: The extra arrays of an imported state's snapshot: CellModeller's step, time step and the
+#: state's largest overlap [fraction of a diameter] (:meth:`CellModellerState.save`).
+SOURCE_ARRAYS = ("cellmodeller.step", "cellmodeller.dt", "cellmodeller.max_overlap")
 #: A CellModeller run's saved states: ``step-NNNNN.pickle``.
 PICKLE_NAME = re.compile(r"step-(\d+)\.pickle")
 #: CellState attributes that become the cells and their lineage.
@@ -247,8 +250,14 @@ class CellModellerState(Snapshot):
 
     def save(self, path: str | Path) -> Path:
         """Write the snapshot (:func:`qpcontact.io.save_colony`, no random state: a run
-        started from it draws from its own seed). Returns the path written."""
-        return save_colony(path, self.colony, self.step, settings=self.settings)
+        started from it draws from its own seed), with where it came from among its extra arrays
+        (:data:`SOURCE_ARRAYS`: CellModeller's step, ``dt`` and the largest overlap as measured,
+        which ``qpcontact plot`` puts in its title). Returns the path written."""
+        from ..geometry.overlap import largest_overlap
+
+        extra = {"cellmodeller.step": np.array([self.cellmodeller_step]), "cellmodeller.dt": np.array([self.dt]),
+                 "cellmodeller.max_overlap": np.array([largest_overlap(self.colony.cells)])}
+        return save_colony(path, self.colony, self.step, settings=self.settings, extra=extra)
 
 
 def read_cellmodeller(path: str | Path, *, step: int | None = None, dt: float | None = None,

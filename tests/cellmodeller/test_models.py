@@ -222,3 +222,19 @@ def test_a_cellmodeller_state_continued_with_its_own_model(tmp_path):
     assert set(state.colony.parent_ids[state.colony.parent_ids >= 0].tolist()) <= set(hook.lineage.values())
     assert np.all(run.colony.cells.lengths <= run.colony.cell_data["targetVol"] * 1.0251)
     assert np.all(run.colony.cell_data["growthRate"] == 1.0)
+
+
+def test_an_imported_state_is_drawn_with_its_source_overlap_and_time_unit(tmp_path, monkeypatch):
+    from qpcontact.io.snapshots import load_snapshot
+    from qpcontact.simulation import picture, simulate
+
+    state = read_cellmodeller(Path(__file__).parents[1] / "data" / "cellmodeller" / "ex1_simpleGrowth_seed1")
+    snapshot = load_snapshot(state.save(tmp_path / "state.npz"))
+    titles = []
+    monkeypatch.setattr(simulate, "colony_picture", lambda path, colony, mechanics, settings, color, title:
+                        titles.append(title) or path)
+    picture.plot_snapshot(snapshot, tmp_path / "state.png")
+    assert "CellModeller's time unit, its step 0.025" in titles[0] and "a CellModeller state (its step 221)" in titles[0]
+    measured = float(snapshot.extra["cellmodeller.max_overlap"][0])
+    assert 0.01 < measured < 0.2 and f"{measured:.3g} of a diameter as measured" in titles[0]
+    assert "doubling times" not in titles[0]
