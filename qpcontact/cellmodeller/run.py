@@ -28,13 +28,14 @@ from typing import Any
 
 import numpy as np
 
-from ..arguments import output_folder, positive_float, positive_int, run_standalone
+from ..cli import output_folder, positive_float, positive_int, run_standalone
 from ..errors import InvalidArgumentError, ModelHookError, OutputFolderError
 from ..io.cellmodeller import CellModellerState, load_pickle, read_cellmodeller
 from ..io.runs import RunFolder, latest_snapshot
 from ..io.snapshots import Snapshot, load_snapshot
+from ..simulation.loop import Run, run_colony
 from ..simulation.settings import ModelSettings, OutputSettings, RunSettings, Settings
-from ..simulation.simulate import Run, exit_status, run_colony
+from ..simulation.simulate import exit_status
 from .bridge import ModelHook
 from .model import Model, load_model
 from .pickles import PickleWriter
@@ -239,7 +240,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run_command(args: argparse.Namespace) -> int:
-    from ..outputs import describe_written
+    from ..io.outputs import describe_written
 
     if args.seed < 0:
         raise InvalidArgumentError(f"--seed: must be >= 0, got {args.seed}")

@@ -226,12 +226,12 @@ def test_a_cellmodeller_state_continued_with_its_own_model(tmp_path):
 
 def test_an_imported_state_is_drawn_with_its_source_overlap_and_time_unit(tmp_path, monkeypatch):
     from qpcontact.io.snapshots import load_snapshot
-    from qpcontact.simulation import picture, simulate
+    from qpcontact.simulation import picture
 
     state = read_cellmodeller(Path(__file__).parents[1] / "data" / "cellmodeller" / "ex1_simpleGrowth_seed1")
     snapshot = load_snapshot(state.save(tmp_path / "state.npz"))
     titles = []
-    monkeypatch.setattr(simulate, "colony_picture", lambda path, colony, mechanics, settings, color, title:
+    monkeypatch.setattr(picture, "colony_picture", lambda path, colony, mechanics, settings, color, title:
                         titles.append(title) or path)
     picture.plot_snapshot(snapshot, tmp_path / "state.png")
     assert "CellModeller's time unit, its step 0.025" in titles[0] and "a CellModeller state (its step 221)" in titles[0]

@@ -12,7 +12,8 @@ from qpcontact.colony.growth import births
 from qpcontact.colony.hooks import load_hook
 from qpcontact.errors import InvalidArgumentError
 from qpcontact.geometry import Cells
-from qpcontact.simulation.simulate import Settings, run_colony
+from qpcontact.simulation.loop import run_colony
+from qpcontact.simulation.settings import Settings
 
 SETTINGS = Settings().updated({"cells": 10**6, "max_steps": 60, "rate_noise": 0.0})
 
