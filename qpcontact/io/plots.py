@@ -248,8 +248,9 @@ def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None
         side.set_xlim(*x_range)
         side.set_ylim(bottom, bottom + height)
         top.get_gridspec().set_height_ratios([top.get_ylim()[1] - top.get_ylim()[0], height])
-        fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label, shrink=0.8,
-                     extend=_beyond(polys), ticks=_ticks(polys, discrete))
+        if polys.get_array() is not None:  # (cells in their own RGB colours have no scale)
+            fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label,
+                         shrink=0.8, extend=_beyond(polys), ticks=_ticks(polys, discrete))
     x_range, y_range = top.get_xlim(), top.get_ylim()
     ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
     fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))

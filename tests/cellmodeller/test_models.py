@@ -96,8 +96,9 @@ def test_planes_keep_the_colony_in_its_channel(tmp_path):
     assert np.ptp(cells.centers[:, 0]) > 4 * np.ptp(cells.centers[:, 1])
 
 
-def test_3d_model_on_its_base_plane_inside_its_sphere():
-    outcome = run_model(MODELS / "biofilm3d.py", cells=30)
+def test_3d_model_on_its_base_plane_inside_its_sphere(tmp_path):
+    outcome = run_model(MODELS / "biofilm3d.py", cells=30, out=tmp_path / "run")
+    assert (tmp_path / "run" / "colony.png").stat().st_size > 0  # from above and from the side, in the cells' colours
     assert outcome.settings.run.dimensions == 3
     cells = outcome.run.colony.cells
     ends = np.concatenate([cells.centers + cells.axes * cells.lengths[:, None] / 2,
