@@ -41,7 +41,9 @@ the colony before and after it and ``born = (mothers, first, second)``, the rows
 returns None or the colony to step from, e.g. with the daughters' own numbers drawn at birth
 (``cell_data``, ``rates``, ``owed``), as CellModeller's ``divide(parent, d1, d2)`` does. It must
 keep the cells and their ids. ``StepControl.dt`` sets the step's time step (a fixed step, as
-CellModeller's ``sim.dt``); a step that fails is still retried with half of it.
+CellModeller's ``sim.dt``); a step that fails is still retried with half of it. Several
+founders, without a snapshot: the hook returns at step 0 a colony of its own cells (any number,
+their types and arrays), or a library run starts from one (``run_colony(settings, start=colony)``).
 
 A model's per-cell state belongs in the colony: ``cell_types`` (an integer per cell, e.g.
 CellModeller's ``cellType``) and ``cell_data`` (arrays by name, e.g. a ``targetVol`` or a

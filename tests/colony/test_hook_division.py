@@ -85,3 +85,28 @@ def test_a_model_files_divided_function_becomes_the_hooks_callback(tmp_path):
     start = founders(1).replace(cell_data={"births": np.zeros(1, dtype=int)})
     run = run_colony(SETTINGS.updated({"max_steps": 80}), start=start, progress=False, hook=hook)
     assert run.colony.cells.n >= 4 and np.all(run.colony.cell_data["births"] >= 1)
+
+
+def test_simulate_starts_from_several_founders_a_hook_places(tmp_path, capsys):
+    """No snapshot needed: at step 0 a hook replaces the default founder with its own cells."""
+    from qpcontact.cli import main
+
+    model = tmp_path / "founders.py"
+    model.write_text(
+        "import numpy as np\nfrom qpcontact.colony import Colony\nfrom qpcontact.geometry import Cells\n\n"
+        "def hook(colony, step):\n"
+        "    if step == 0:\n"
+        "        c = colony.cells\n"
+        "        cells = Cells(centers=[[-10.0, 0, 0], [10.0, 0, 0], [0, 15.0, 0]], axes=[[1.0, 0, 0]] * 3, lengths=c.lengths[0],\n"
+        "                      radii=0.5, masses=c.masses[0], growth_inertia=c.growth_inertia[0])\n"
+        "        return Colony(cells, np.arange(3), np.full(3, -1), np.full(3, colony.rates[0]), cell_types=[0, 1, 2])\n")
+    out = tmp_path / "run"
+    assert main(["simulate", "--hook", str(model), "--cells", "24", "--out", str(out), "--quiet"]) == 0
+    capsys.readouterr()
+    from qpcontact.io.runs import latest_snapshot
+    from qpcontact.io.snapshots import load_snapshot
+
+    colony = load_snapshot(latest_snapshot(out)).colony
+    assert colony.cells.n >= 24 and set(colony.cell_types.tolist()) == {0, 1, 2}
+    for kind, x in ((0, -10.0), (1, 10.0)):
+        assert abs(np.mean(colony.cells.centers[colony.cell_types == kind, 0]) - x) < 4.0
