@@ -6,7 +6,7 @@ from CellModeller.Regulation.ModuleRegulator import ModuleRegulator
 
 
 def setup(sim):
-    biophys = CLBacterium(sim, jitter_z=False, max_planes=2)
+    biophys = CLBacterium(sim, jitter_z=False, max_planes=2, gamma=100)
     biophys.addPlane((0, -3, 0), (0, 1, 0), 1)
     biophys.addPlane((0, 3, 0), (0, -1, 0), 1)
     sim.init(biophys, ModuleRegulator(sim, sim.moduleName), None, None)
