@@ -200,6 +200,8 @@ COMMANDS = {
     "plot": ("qpcontact.simulation.picture", "draw a saved snapshot again as its run drew colony.png"),
     "import-cellmodeller": ("qpcontact.io.cellmodeller", "read a CellModeller state (its pickles) into a snapshot "
                             "that simulate --start continues"),
+    "cellmodeller": ("qpcontact.cellmodeller.run", "run a CellModeller model script unchanged on qpcontact's physics: "
+                     "simulate's run folder and CellModeller-layout pickles"),
 }
 
 

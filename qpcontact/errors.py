@@ -9,6 +9,7 @@ class that fits it (``ValueError`` for bad input, ``ImportError`` for a missing 
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 
@@ -97,3 +98,15 @@ class PullingImpulseWarning(UserWarning):
     physical resolution, only the all-active solve; it is a check of a QP answer only where every
     contact pushes (:func:`qpcontact.compare_with_linear`). The result says so too
     (``Result.pulling``)."""
+
+
+def install_hint(extra: str) -> str:
+    """How to install qpcontact's extra ``extra``, in words that work where this qpcontact came
+    from: ``pip install 'qpcontact[extra]'`` (an index install), and where the package sits in a
+    source checkout (its ``pyproject.toml`` beside it) also ``pip install -e 'CHECKOUT[extra]'``,
+    since the index form would fetch another qpcontact."""
+    checkout = Path(__file__).resolve().parents[1]
+    index = f"pip install 'qpcontact[{extra}]'"
+    if (checkout / "pyproject.toml").is_file():
+        return f"{index} (from this source checkout: pip install -e '{checkout}[{extra}]')"
+    return index

@@ -19,8 +19,8 @@ from qpcontact import cli
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "qpcontact"
 #: The wings, lowest first: a module may import from its own wing and the ones before it.
-WINGS = ("geometry", "assembly", "solvers", "resolve", "timestep", "colony", "io", "simulation", "ensembles",
-         "studies")
+WINGS = ("geometry", "assembly", "solvers", "resolve", "timestep", "colony", "io", "simulation", "cellmodeller",
+         "ensembles", "studies")
 
 
 def _wing_of(module: str) -> str | None:

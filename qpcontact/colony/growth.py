@@ -236,8 +236,9 @@ def check_division_length(division_length: float | np.ndarray, radii: float | np
 
 def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.Generator, *,
            axis_noise: float = 0.02, rate_noise: float = 0.0, base_rate: float | None = None,
-           planar: bool = False, type_rates: Any = None) -> Colony:
-    """Split every cell with ``l >= division_length`` into two daughters (module docstring).
+           planar: bool = False, type_rates: Any = None, dividing: Any = None) -> Colony:
+    """Split every cell with ``l >= division_length`` (or every cell ``dividing`` marks) into
+    two daughters (module docstring).
 
     Args:
         colony: the colony.
@@ -252,6 +253,9 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         planar: 2D monolayer: turn the axes about z only, so they stay in the xy-plane.
         type_rates: mean growth rate of newborn cells of each type [1/time], indexed by
             ``Colony.cell_types`` (a sequence, each > 0); replaces ``base_rate`` when given.
+        dividing: an (N,) boolean mask of the cells that divide, whatever their length (a
+            model's own rule, as CellModeller's ``divideFlag``); ``division_length`` is then not
+            used. Each marked cell must be longer than ``2ρ`` (daughters of a positive length).
 
     Returns:
         The new colony: each mother replaced by daughter 1 (in her place), daughter 2 appended;
@@ -262,7 +266,7 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
         InvalidArgumentError: bad arguments; a dividing cell whose type has no rate in
             ``type_rates``.
     """
-    division_length = _division_lengths(colony, division_length)
+    division_length = _division_lengths(colony, division_length, check=dividing is None)
     axis_noise = number("axis_noise", axis_noise, minimum=0.0)
     rate_noise = number("rate_noise", rate_noise, minimum=0.0)
     base_rate = number("base_rate", base_rate, minimum=0.0, allow_none=True)
@@ -270,7 +274,10 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
     if type_rates is not None:
         type_rates = check_type_rates("type_rates", type_rates)
     cells = colony.cells
-    dividing = np.flatnonzero(cells.lengths >= division_length)
+    if dividing is None:
+        dividing = np.flatnonzero(cells.lengths >= division_length)
+    else:
+        dividing = np.flatnonzero(_division_mask(dividing, cells))
     if dividing.size == 0:
         return colony
     mother_types = colony.cell_types[dividing]
@@ -307,9 +314,10 @@ def divide(colony: Colony, division_length: float | np.ndarray, rng: np.random.G
     )
 
 
-def _division_lengths(colony: Colony, division_length: Any) -> float | np.ndarray:
+def _division_lengths(colony: Colony, division_length: Any, check: bool = True) -> float | np.ndarray:
     """The division length checked: a number > 0, or one finite number > 0 per cell, each above
-    its cell's ``2ρ`` (:func:`check_division_length`)."""
+    its cell's ``2ρ`` (:func:`check_division_length`; not when ``check`` is False: cells marked
+    to divide do not use it)."""
     if np.ndim(division_length) == 0:
         division_length = number("division_length", division_length, minimum=0.0, open_minimum=True)
     else:
@@ -317,7 +325,8 @@ def _division_lengths(colony: Colony, division_length: Any) -> float | np.ndarra
         if division_length.shape != (colony.cells.n,) or not np.all(np.isfinite(division_length) & (division_length > 0)):
             raise InvalidArgumentError(f"division_length: expected a number > 0 or {colony.cells.n} finite numbers > 0 "
                                        f"(one per cell), got shape {division_length.shape}")
-    check_division_length(division_length, colony.cells.radii)
+    if check:
+        check_division_length(division_length, colony.cells.radii)
     return division_length
 
 
@@ -358,6 +367,38 @@ def _daughter_cells(cells: Cells, dividing: np.ndarray, split: Callable[..., np.
     )
 
 
+def _division_mask(dividing: Any, cells: Cells) -> np.ndarray:
+    """``divide``'s ``dividing`` checked: an (N,) boolean mask whose cells are long enough to
+    divide (daughters born at ``l/2 − ρ > 0``)."""
+    mask = np.asarray(dividing)
+    if mask.dtype.kind != "b" or mask.shape != (cells.n,):
+        raise InvalidArgumentError(f"dividing: expected an ({cells.n},) boolean mask (one per cell), got "
+                                   f"{mask.dtype} values of shape {mask.shape}")
+    short = mask & ~(cells.lengths > 2.0 * cells.radii)
+    if short.any():
+        i = int(np.flatnonzero(short)[0])
+        raise InvalidArgumentError(
+            f"dividing: cell {i} is marked to divide at length {cells.lengths[i]:g} µm, but daughters are born at "
+            f"length/2 − radius = {cells.lengths[i] / 2 - cells.radii[i]:g} µm: a cell must be longer than 2 × radius "
+            f"= {2 * cells.radii[i]:g} µm to divide")
+    return mask
+
+
+def births(before: Colony, after: Colony) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Who was born when ``after = divide(before, ...)``: ``(mothers, first, second)``, the rows
+    of the dividing cells in ``before`` and of their first and second daughters in ``after``
+    (:func:`divide` puts daughter 1 in her mother's row and appends daughter 2, in order).
+
+    Raises:
+        InvalidArgumentError: ``after`` is not a division of ``before``.
+    """
+    n = before.cells.n
+    mothers = np.flatnonzero(after.ids[:n] != before.ids) if after.cells.n >= n else np.zeros(0, dtype=np.intp)
+    if after.cells.n != n + mothers.size:
+        raise InvalidArgumentError(f"after: {after.cells.n} cells are not a division of {n} ({mothers.size} mothers)")
+    return mothers, mothers.copy(), n + np.arange(mothers.size)
+
+
 def check_type_rates(name: str, value: Any) -> np.ndarray:
     """Per-type growth rates [1/time] as a float array: a non-empty sequence of finite numbers
     > 0, one per cell type (type ``k``'s rate is entry ``k``).
@@ -389,10 +430,7 @@ def daughters_share(values: np.ndarray, before: Colony, after: Colony) -> np.nda
         raise InvalidArgumentError(f"values: expected one row per cell ({n}), got shape {values.shape}")
     if after is before:
         return values
-    # divide puts daughter 1 in her mother's place under a new id and appends daughter 2, in order
-    dividing = np.flatnonzero(after.ids[:n] != before.ids) if after.cells.n >= n else np.zeros(0, dtype=np.intp)
-    if after.cells.n != n + dividing.size:
-        raise InvalidArgumentError(f"after: {after.cells.n} cells are not a division of {n} ({dividing.size} mothers)")
+    dividing = births(before, after)[0]
     half = values[dividing] / 2
     out = values.copy()
     out[dividing] = half

@@ -31,6 +31,20 @@ the hook sets theirs from the next step on. (The same laws without a hook: the m
 ``pressure_growth`` and ``stall_pressure``, ``qpcontact simulate --pressure-growth linear``,
 under which a newborn's first step is slowed by her mother's pressure.)
 
+**Division and birth.** ``StepControl.dividing`` marks the cells that divide at the start of the
+step whatever their length (a model's own rule, CellModeller's ``divideFlag``), and
+``StepControl.division_length`` gives each cell its own length to divide at. A hook with an
+attribute ``divided``, a function ``divided(before, after, born)`` (in a model file: a top-level
+function ``divided``, which :func:`load_hook` attaches), is called after every division with
+the colony before and after it and ``born = (mothers, first, second)``, the rows of the mothers in
+``before`` and of their daughters in ``after`` (:func:`qpcontact.colony.growth.births`): it
+returns None or the colony to step from, e.g. with the daughters' own numbers drawn at birth
+(``cell_data``, ``rates``, ``owed``), as CellModeller's ``divide(parent, d1, d2)`` does. It must
+keep the cells and their ids. ``StepControl.dt`` sets the step's time step (a fixed step, as
+CellModeller's ``sim.dt``); a step that fails is still retried with half of it. Several
+founders, without a snapshot: the hook returns at step 0 a colony of its own cells (any number,
+their types and arrays), or a library run starts from one (``run_colony(settings, start=colony)``).
+
 A model's per-cell state belongs in the colony: ``cell_types`` (an integer per cell, e.g.
 CellModeller's ``cellType``) and ``cell_data`` (arrays by name, e.g. a ``targetVol`` or a
 signal). Both daughters inherit their mother's rows at division, and the snapshots save them,
@@ -58,7 +72,7 @@ import numpy as np
 
 from ..errors import InvalidArgumentError, ModelHookError
 from ..timestep.mechanics import CellMechanics
-from .growth import Colony, check_division_length
+from .growth import Colony, births, check_division_length
 
 
 @dataclass
@@ -78,11 +92,17 @@ class StepControl:
             start of this step (before it moves: the step's contact solve then clears the
             daughters' overlap): a number or an (N,) array (None: the run's
             ``division_length``). Daughters need ``l/2 > radius``.
+        dividing: an (N,) boolean mask of the cells of the colony given that divide at the start
+            of this step, whatever their length (``division_length`` is then not used; None: the
+            length rule).
+        dt: the time step of this step [the run's time unit] (None: the run's rule).
     """
 
     colony: Colony | None = None
     drive: np.ndarray | None = None
     division_length: float | np.ndarray | None = None
+    dividing: np.ndarray | None = None
+    dt: float | None = None
 
 
 #: A model hook: ``hook(colony, step) -> None | Colony | StepControl`` (or
@@ -133,7 +153,8 @@ def apply_hook(hook: Hook | None, colony: Colony, step: int, mechanics: CellMech
     if not isinstance(answer, StepControl):
         raise ModelHookError(f"model hook at step {step}: returned {type(answer).__name__}; expected None, a "
                                    "Colony or a StepControl")
-    control = StepControl(colony if answer.colony is None else answer.colony, answer.drive, answer.division_length)
+    control = StepControl(colony if answer.colony is None else answer.colony, answer.drive, answer.division_length,
+                          answer.dividing, answer.dt)
     if not isinstance(control.colony, Colony):
         raise ModelHookError(f"model hook at step {step}: StepControl.colony must be a Colony")
     n = control.colony.cells.n
@@ -152,7 +173,49 @@ def apply_hook(hook: Hook | None, colony: Colony, step: int, mechanics: CellMech
         except InvalidArgumentError as exc:
             raise ModelHookError(f"model hook at step {step}: {exc}") from None
         control.division_length = length
+    _check_division_and_dt(control, step, n)
     return control
+
+
+def _check_division_and_dt(control: StepControl, step: int, n: int) -> None:
+    """``StepControl.dividing`` (an (n,) boolean mask) and ``dt`` (finite, > 0) checked."""
+    if control.dividing is not None:
+        mask = np.asarray(control.dividing)
+        if mask.dtype.kind != "b" or mask.shape != (n,):
+            raise ModelHookError(f"model hook at step {step}: dividing must be an ({n},) boolean mask, got "
+                                 f"{mask.dtype} values of shape {mask.shape}")
+        if control.division_length is not None:
+            raise ModelHookError(f"model hook at step {step}: give dividing or division_length, not both")
+        control.dividing = mask
+    if control.dt is not None:
+        if isinstance(control.dt, bool) or not isinstance(control.dt, (int, float, np.number)) \
+                or not (np.isfinite(control.dt) and control.dt > 0):
+            raise ModelHookError(f"model hook at step {step}: dt must be a finite number > 0, got {control.dt!r}")
+        control.dt = float(control.dt)
+
+
+def apply_divided(hook: Hook | None, before: Colony, after: Colony, step: int) -> Colony:
+    """The colony after a division (``after = divide(before, ...)``) as the hook's divide
+    callback ``hook.divided(before, after, born)`` leaves it (module docstring), or ``after``
+    when the hook has none or nobody divided.
+
+    Raises:
+        ModelHookError: the callback raised (its exception is the cause), or returned something
+            else than None or a Colony of the same cells (same ids, in order).
+    """
+    callback = getattr(hook, "divided", None)
+    if callback is None or after is before:
+        return after
+    try:
+        answer = callback(before, after, births(before, after))
+    except Exception as exc:  # the model's own code
+        raise ModelHookError(f"model hook's divided at step {step} raised {type(exc).__name__}: {exc}") from exc
+    if answer is None:
+        return after
+    if not isinstance(answer, Colony) or not np.array_equal(answer.ids, after.ids):
+        raise ModelHookError(f"model hook's divided at step {step}: must return None or the colony it was given "
+                             "with the same cells (ids, in order), changed only in their numbers")
+    return answer
 
 
 def _where(exc: Exception, path: Path) -> str:
@@ -189,4 +252,9 @@ def load_hook(path: str | Path) -> Hook:
     hook = getattr(module, "hook", None)
     if not callable(hook):
         raise InvalidArgumentError(f"model {path}: defines no function hook(colony, step)")
+    divided = getattr(module, "divided", None)
+    if divided is not None:
+        if not callable(divided):
+            raise InvalidArgumentError(f"model {path}: divided is not a function divided(before, after, born)")
+        hook.divided = divided
     return hook

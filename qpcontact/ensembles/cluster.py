@@ -33,10 +33,10 @@ from pathlib import Path
 from typing import Any
 
 from ..cli import positive_int
-from ..errors import InvalidArgumentError, NotInstalledError
+from ..errors import InvalidArgumentError, NotInstalledError, install_hint
 
 #: How to install Dask for qpcontact.
-INSTALL_HINT = "pip install 'qpcontact[sweep]'"
+INSTALL_HINT = install_hint("sweep")
 #: Seconds to wait for an existing scheduler to answer.
 CONNECT_TIMEOUT = 20.0
 #: LocalCluster options: no dashboard, the scheduler's HTTP server on a free port.

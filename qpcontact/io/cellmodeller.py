@@ -80,6 +80,9 @@ from .snapshots import Snapshot, npz_path, save_colony
 
 __all__ = ["CellModellerState", "CellState", "load_pickle", "read_cellmodeller", "run_pickles"]
 
+#: The extra arrays of an imported state's snapshot: CellModeller's step, time step and the
+#: state's largest overlap [fraction of a diameter] (:meth:`CellModellerState.save`).
+SOURCE_ARRAYS = ("cellmodeller.step", "cellmodeller.dt", "cellmodeller.max_overlap")
 #: A CellModeller run's saved states: ``step-NNNNN.pickle``.
 PICKLE_NAME = re.compile(r"step-(\d+)\.pickle")
 #: CellState attributes that become the cells and their lineage.
@@ -135,6 +138,8 @@ _NUMPY = _numpy_builders()
 #: (module, name) -> what the unpickler builds for it: nothing else is built.
 ALLOWED: dict[tuple[str, str], Any] = {
     ("CellModeller.CellState", "CellState"): CellState,
+    # the pickles qpcontact cellmodeller writes (qpcontact.cellmodeller.pickles)
+    ("qpcontact.cellmodeller.state", "CellState"): CellState,
     ("numpy", "ndarray"): np.ndarray,
     ("numpy", "dtype"): np.dtype,
     **{(f"numpy.{core}.multiarray", name): _NUMPY[name] for core in ("core", "_core") for name in ("_reconstruct", "scalar")},
@@ -245,12 +250,18 @@ class CellModellerState(Snapshot):
 
     def save(self, path: str | Path) -> Path:
         """Write the snapshot (:func:`qpcontact.io.save_colony`, no random state: a run
-        started from it draws from its own seed). Returns the path written."""
-        return save_colony(path, self.colony, self.step, settings=self.settings)
+        started from it draws from its own seed), with where it came from among its extra arrays
+        (:data:`SOURCE_ARRAYS`: CellModeller's step, ``dt`` and the largest overlap as measured,
+        which ``qpcontact plot`` puts in its title). Returns the path written."""
+        from ..geometry.overlap import largest_overlap
+
+        extra = {"cellmodeller.step": np.array([self.cellmodeller_step]), "cellmodeller.dt": np.array([self.dt]),
+                 "cellmodeller.max_overlap": np.array([largest_overlap(self.colony.cells)])}
+        return save_colony(path, self.colony, self.step, settings=self.settings, extra=extra)
 
 
 def read_cellmodeller(path: str | Path, *, step: int | None = None, dt: float | None = None,
-                      growth_inertia_ratio: float = 1000.0) -> CellModellerState:
+                      growth_inertia_ratio: float | None = None) -> CellModellerState:
     """Read a CellModeller state (module docstring: what becomes what).
 
     Args:
@@ -260,7 +271,9 @@ def read_cellmodeller(path: str | Path, *, step: int | None = None, dt: float | 
         dt: CellModeller's time step [its time unit]; needed only for a pickle of step 0 (the
             cells' time then tells nothing), else taken from the pickle and checked against it.
         growth_inertia_ratio: each cell's growth inertia as a multiple of its mass
-            (``[model] growth_inertia_ratio``, dimensionless).
+            (``[model] growth_inertia_ratio``, dimensionless); default: the model's own
+            (:func:`model_gamma`: CellModeller's ``gamma`` over ``muA·(l + 2ρ)`` at the cells'
+            median length, as docs/cellmodeller.md explains; 1000 when the pickle holds no model).
 
     Returns:
         The state (:class:`CellModellerState`), its cells ordered as CellModeller's arrays.
@@ -272,7 +285,8 @@ def read_cellmodeller(path: str | Path, *, step: int | None = None, dt: float | 
         InvalidArgumentError: bad arguments, a step the folder lacks, a ``dt`` the pickle contradicts.
     """
     dt = number("dt", dt, minimum=0.0, open_minimum=True, allow_none=True)
-    growth_inertia_ratio = number("growth_inertia_ratio", growth_inertia_ratio, minimum=0.0, open_minimum=True)
+    growth_inertia_ratio = number("growth_inertia_ratio", growth_inertia_ratio, minimum=0.0, open_minimum=True,
+                                  allow_none=True)
     source = pick_pickle(path, step)
     data = load_pickle(source)
     states, step_number, lineage = _contents(source, data)
@@ -281,6 +295,9 @@ def read_cellmodeller(path: str | Path, *, step: int | None = None, dt: float | 
     centers, axes = _vectors(source, cells, columns["pos"], "pos"), _vectors(source, cells, columns["dir"], "dir")
     lengths, radii = _numbers(source, cells, columns["length"], "length"), _numbers(source, cells, columns["radius"], "radius")
     dt = _time_step(source, cells, step_number, dt)
+    model_notes: list[str] = []
+    if growth_inertia_ratio is None:
+        growth_inertia_ratio = _ratio_of(str(data.get("moduleStr") or ""), lengths, radii, model_notes)
     ids = np.array(columns["id"], dtype=np.int64)
     cell_data, left_out = _own_data(cells)
     try:
@@ -296,8 +313,65 @@ def read_cellmodeller(path: str | Path, *, step: int | None = None, dt: float | 
     except QPContactError as exc:
         raise InvalidSnapshotError(f"{source}: {exc}") from None
     settings, notes = _settings(colony)
+    settings["model"]["growth_inertia_ratio"] = growth_inertia_ratio
+    notes += model_notes + _division_notes(colony, settings, source, dt)
     return CellModellerState(colony, step_number + 1, settings, path=source, cellmodeller_step=step_number, dt=dt,
                              model=str(data.get("moduleName", "")), left_out={**DERIVED, **left_out}, notes=notes)
+
+
+def model_gamma(source: str) -> tuple[float, float] | None:
+    """``(gamma, muA)`` of the ``CLBacterium(...)`` call in a model's source (CellModeller's
+    defaults 10 and 1 for those it does not give), or None when the source has no such call or
+    gives them as expressions, not numbers."""
+    import ast
+
+    try:
+        tree = ast.parse(source)
+    except (SyntaxError, ValueError):
+        return None
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(node.func, "attr", "")) == "CLBacterium":
+            given = {k.arg: k.value for k in node.keywords if k.arg in ("gamma", "muA")}
+            try:
+                values = {name: float(ast.literal_eval(value)) for name, value in given.items()}
+            except (ValueError, TypeError, SyntaxError):
+                return None
+            return values.get("gamma", 10.0), values.get("muA", 1.0)
+    return None
+
+
+def _ratio_of(source: str, lengths: np.ndarray, radii: np.ndarray, notes: list[str]) -> float:
+    """The growth inertia ratio that weighs growth against motion as the model's ``gamma`` does
+    (CellModeller's drag: ``muA·(l + 2ρ)`` for motion, ``gamma`` for growth; qpcontact's: the
+    mass, the volume, and ``ratio ×`` it), at the cells' median length."""
+    found = model_gamma(source)
+    if found is None:
+        notes.append("the pickle holds no model with a CLBacterium(gamma=...): growth_inertia_ratio is qpcontact's "
+                     "1000 (cells keep growing and push their neighbours), not CellModeller's")
+        return 1000.0
+    gamma, mu = found
+    length, radius = float(np.median(lengths)), float(np.median(radii))
+    ratio = gamma / (mu * (length + 2 * radius))  # G/m of CellModeller's drag matrix
+    notes.append(f"growth_inertia_ratio {ratio:.3g}: CellModeller's gamma {gamma:g} over muA·(length + 2·radius) = "
+                 f"{mu * (length + 2 * radius):.3g} at the median length {length:.3g} µm (its growth drag against its "
+                 "drag of motion; docs/cellmodeller.md)")
+    return float(ratio)
+
+
+def _division_notes(colony: Colony, settings: dict[str, Any], source: Path, dt: float) -> list[str]:
+    """What qpcontact simulate does instead of the model's division and time unit, said."""
+    notes = [f"time is CellModeller's own unit (growthRate per that unit; its step dt {dt:g}), not qpcontact's "
+             "doubling times"]
+    target = colony.cell_data.get("targetVol")
+    if target is not None and target.ndim == 1 and target.size:
+        length = float(np.median(target))
+        if length > 2 * float(np.max(colony.cells.radii)):
+            settings["model"]["division_length"] = length
+        notes.append(f"qpcontact simulate divides at one division_length ({length:.3g} µm, the cells' median "
+                     f"targetVol), not at each cell's targetVol, and newborns keep their mother's; to continue with "
+                     f"the model's own rules: qpcontact cellmodeller MODEL.py --start {source} (the model's source "
+                     "is in the pickle, moduleStr)")
+    return notes
 
 
 def _settings(colony: Colony) -> tuple[dict[str, Any], list[str]]:
@@ -453,9 +527,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--dt", type=positive_float, metavar="DT",
                         help="CellModeller's time step [its time unit]; needed only for a pickle of step 0 (default: "
                              "from the pickle)")
-    parser.add_argument("--growth-inertia-ratio", type=positive_float, default=1000.0, metavar="R",
-                        help="each cell's growth inertia as a multiple of its mass [dimensionless] (default: 1000, as "
-                             "[model] growth_inertia_ratio)")
+    parser.add_argument("--growth-inertia-ratio", type=positive_float, metavar="R",
+                        help="each cell's growth inertia as a multiple of its mass [dimensionless] (default: the "
+                             "model's CLBacterium gamma as that ratio, docs/cellmodeller.md; 1000 without a model)")
     parser.add_argument("--overwrite", action="store_true", help="replace --out if it exists (default: refuse)")
 
 

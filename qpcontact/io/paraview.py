@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from ..colony.growth import Colony
-from ..errors import InvalidArgumentError, NotInstalledError
+from ..errors import InvalidArgumentError, NotInstalledError, install_hint
 from ..timestep.mechanics import CellMechanics
 from .outputs import atomic_write, replacing
 
@@ -49,7 +49,7 @@ def _meshio() -> Any:
     try:
         import meshio
     except ImportError:
-        raise NotInstalledError("ParaView files need meshio: pip install 'qpcontact[vtk]'") from None
+        raise NotInstalledError(f"ParaView files need meshio: {install_hint('vtk')}") from None
     return meshio
 
 

@@ -27,6 +27,7 @@ Lengths are labelled in µm and time in doubling times, the units of ``qpcontact
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -140,11 +141,14 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     coloured by axis orientation in the xy-plane (0–180°), or by ``values`` (one number per
     cell, e.g. :func:`qpcontact.cell_pressure`; colour bar labelled ``value_label``, with its
     units: :func:`pressure_label`; with ``discrete``, integers >= 0 such as cell types, one
-    colour each), with the planes seen edge-on."""
+    colour each; an (N, 3) array: each cell's own RGB colour in [0, 1], as a CellModeller
+    model's ``color``, no colour bar), with the planes seen edge-on."""
     i, j, k = VIEWS[view]
     # Cells farther from the viewer are drawn first: the top layer of a 3D biofilm from above,
     # the front row (small y) from the side.
     order = np.argsort(cells.centers[:, k] if view == "top" else -cells.centers[:, k], kind="stable")
+    if values is not None and not discrete and np.shape(values) == (cells.n, 3):
+        return _draw_rgb(ax, cells, np.asarray(values, dtype=float), order, view, planes, length_unit, title)
     edges = 0.2
     cmap: str | Colormap
     if values is not None and discrete:
@@ -179,9 +183,27 @@ def draw_colony(ax: Axes, cells: Cells, *, title: str | None = None, colorbar: b
     ax.set_xlabel(f"{names[i]} [{length_unit}]")
     ax.set_ylabel(f"{names[j]} [{length_unit}]")
     if title:
-        ax.set_title(title)
+        ax.set_title(fit_title(title, 80))
     if colorbar and ax.figure is not None:
         ax.figure.colorbar(polys, ax=ax, label=label, shrink=0.8, extend=_beyond(polys), ticks=_ticks(polys, discrete))
+    return polys
+
+
+def _draw_rgb(ax: Axes, cells: Cells, rgb: np.ndarray, order: np.ndarray, view: str, planes: Sequence[Any],
+              length_unit: str, title: str | None) -> PolyCollection:
+    """:func:`draw_colony` with each cell in its own RGB colour (clipped to [0, 1])."""
+    i, j, _ = VIEWS[view]
+    rgb = np.clip(np.nan_to_num(rgb), 0.0, 1.0)
+    polys = PolyCollection(list(capsule_outlines(cells, view)[order]), facecolors=rgb[order], edgecolors="k",
+                           linewidths=0.2 if cells.n <= 1000 else 0.0)
+    ax.add_collection(polys)
+    ax.set_aspect("equal")
+    ax.autoscale_view()
+    draw_planes(ax, planes, view)
+    ax.set_xlabel(f"{'xyz'[i]} [{length_unit}]")
+    ax.set_ylabel(f"{'xyz'[j]} [{length_unit}]")
+    if title:
+        ax.set_title(fit_title(title, 80))
     return polys
 
 
@@ -226,13 +248,14 @@ def save_colony_picture(path: str | Path, cells: Cells, title: str | None = None
         side.set_xlim(*x_range)
         side.set_ylim(bottom, bottom + height)
         top.get_gridspec().set_height_ratios([top.get_ylim()[1] - top.get_ylim()[0], height])
-        fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label, shrink=0.8,
-                     extend=_beyond(polys), ticks=_ticks(polys, discrete))
+        if polys.get_array() is not None:  # (cells in their own RGB colours have no scale)
+            fig.colorbar(polys, ax=[top, side], label=ORIENTATION_LABEL if values is None else value_label,
+                         shrink=0.8, extend=_beyond(polys), ticks=_ticks(polys, discrete))
     x_range, y_range = top.get_xlim(), top.get_ylim()
     ratio = (y_range[1] - y_range[0] + height) / (x_range[1] - x_range[0])  # of the panels together
     fig.set_size_inches(7, float(np.clip(5.2 * ratio + 1.6, 3, 12)))
     if title:
-        fig.suptitle(title, fontsize=10)
+        fig.suptitle(fit_title(title, 95), fontsize=10)
     fig.savefig(path)
     return Path(path)
 
@@ -259,7 +282,7 @@ def pressure_profile_figure(cells: Cells, pressure: Any, *, title: str | None = 
     ax.axhline(0.0, color="0.3", lw=0.5)
     ax.legend(fontsize=8)
     if title:
-        ax.set_title(title, fontsize=10)
+        ax.set_title(fit_title(title, 80), fontsize=10)
     return fig
 
 
@@ -273,6 +296,12 @@ def plot_pressure_profile(path: str | Path, cells: Cells, pressure: Any, title: 
     pressure of ``qpcontact simulate``, :func:`pressure_label`)."""
     pressure_profile_figure(cells, pressure, title=title, bins=bins, label=label).savefig(path)
     return Path(path)
+
+
+def fit_title(title: str, width: int) -> str:
+    """``title`` with each of its lines wrapped at ``width`` characters (about the figure's
+    width at the title's font size), so that no title is clipped at the figure's edges."""
+    return "\n".join(textwrap.fill(line, width, break_on_hyphens=False) or line for line in title.splitlines())
 
 
 def positive(values: Sequence[float]) -> np.ndarray:
@@ -311,11 +340,12 @@ def history_figure(history: Mapping[str, Sequence[float]], title: str | None = N
         ax.set_xlabel(f"time [{time_unit}]")
     fig.supxlabel("steps without overlap, contacts or residual have no point on the log axes", fontsize=7, color="0.4")
     if title:
-        fig.suptitle(title)
+        fig.suptitle(fit_title(title, 110))
     return fig
 
 
-def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title: str | None = None) -> Path:
+def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title: str | None = None,
+                 time_unit: str = "doubling times") -> Path:
     """Four panels against simulated time: cell count; largest and mean overlap as a fraction
     of the diameter; solver time per step [s]; the velocity step's penetration and
     complementarity residuals (scaled), or, where the history has none (the position step, which
@@ -324,7 +354,7 @@ def plot_history(path: str | Path, history: Mapping[str, Sequence[float]], title
     ``mean_overlap``, ``solve_seconds`` and, optionally, ``penetration``, ``complementarity``,
     ``linearizations``, ``rejected``. Zeros (no overlap, no contact) are not drawn
     (:func:`positive`)."""
-    history_figure(history, title).savefig(path)
+    history_figure(history, title, time_unit).savefig(path)
     return Path(path)
 
 

@@ -38,14 +38,14 @@ import numpy as np
 
 from ..colony.growth import Colony
 from ..colony.statistics import colony_statistics
-from ..errors import InvalidArgumentError, NotInstalledError, OutputFolderError
+from ..errors import InvalidArgumentError, NotInstalledError, OutputFolderError, install_hint
 from ..timestep.mechanics import CellMechanics
 from .outputs import atomic_write
 from .runs import HISTORY_FIELDS, RunFolder, latest_snapshot
 from .snapshots import Snapshot, load_snapshot
 
 #: The extra that :func:`colony_frame`, :func:`run_frame` and Parquet files need.
-EXTRA = "pip install 'qpcontact[table]'"
+EXTRA = install_hint("table")
 #: The columns of every cell table, in order (the mechanics and ``cell_data`` columns follow).
 CELL_COLUMNS = ("id", "parent_id", "cell_type", "x", "y", "z", "axis_x", "axis_y", "axis_z", "length", "radius", "rate",
                 "owed")

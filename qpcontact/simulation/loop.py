@@ -19,16 +19,17 @@ import math
 import signal
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from ..colony.growth import Colony, daughters_share, divide
-from ..colony.hooks import Hook, apply_hook, load_hook
+from ..colony.hooks import Hook, apply_divided, apply_hook, load_hook
 from ..colony.pressure import PressureGrowth
 from ..errors import InvalidArgumentError, ModelHookError, SolverFailedError, TooManyContactsError
-from ..geometry import Cells, capsule_volume
+from ..geometry import Cells, Plane, capsule_volume
 from ..io.runs import HISTORY_FIELDS, RunFolder
 from ..io.snapshots import Snapshot
 from ..timestep.mechanics import CellMechanics
@@ -145,7 +146,8 @@ def initial_state(settings: Settings, start: Colony | Snapshot | None) -> tuple[
 
 def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, progress: bool = True,
                folder: RunFolder | None = None, frame_growth: float = 0.0, hook: Hook | None = None,
-               pressure_growth: PressureGrowth | None = None, comm: Any = None) -> Run:
+               pressure_growth: PressureGrowth | None = None, comm: Any = None,
+               planes: Sequence[Plane] | None = None) -> Run:
     """Grow a colony until it has ``settings.run.cells`` cells (or reaches step
     ``settings.run.max_steps``).
 
@@ -173,6 +175,8 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
         comm: the MPI processes this run is split over (mpi4py communicator; every process calls
             with the same arguments, the position solver ``ipm-petsc``, and only one of them
             with a ``folder``: :mod:`qpcontact.simulation.ranks`); None: one process.
+        planes: the walls the cells stay on one side of (:class:`qpcontact.Plane`); None: the
+            settings' (:meth:`Settings.planes`: the substrate in 3D, none in 2D).
 
     Returns:
         A :class:`Run`. A failed contact solve, a step that cannot be taken (a cell compressed
@@ -186,7 +190,7 @@ def run_colony(settings: Settings, *, start: Colony | Snapshot | None = None, pr
     if hook is None and settings.model.hook:
         hook = load_hook(settings.model.hook)
     check_target(settings, state.colony, hook)
-    take_step = step_function(settings, state.extra, comm)  # the run's one step function (swap it here)
+    take_step = step_function(settings, state.extra, comm, planes)  # the run's one step function (swap it here)
     if pressure_growth is None:
         pressure_growth = pressure_growth_of(settings)
     bar = tqdm(total=settings.run.cells, initial=state.colony.cells.n, unit="cell", disable=not progress,
@@ -236,14 +240,15 @@ def prepare_step(state: RunState, settings: Settings, hook: Hook | None,
     divided = divide(current, model.division_length if control.division_length is None
                      else control.division_length, state.rng, axis_noise=model.axis_noise,
                      rate_noise=model.rate_noise, base_rate=model.rate, planar=planar,
-                     type_rates=model.type_rates or None)
+                     type_rates=model.type_rates or None, dividing=control.dividing)
+    divided = apply_divided(hook, current, divided, state.step)  # the daughters' own numbers
     stepping = divided
     if pressure_growth is not None:  # slowed for this step only: the colony keeps its rates
         felt = mechanics if current is colony else mechanics.carried_over(colony, current)
         if divided is not current:  # a daughter feels her mother's pressure
             felt = felt.carried_over(current, divided)
         stepping = divided.replace(rates=pressure_growth.rates(divided, felt))
-    dt = settings.time_step_of(stepping)
+    dt = settings.time_step_of(stepping) if control.dt is None else control.dt
     drive = sink_drive(settings, divided)
     if control.drive is not None:
         shared = daughters_share(control.drive, current, divided)

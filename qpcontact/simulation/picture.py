@@ -116,6 +116,13 @@ def plot_snapshot(snapshot: Snapshot, path: str | Path, color: str = "orientatio
     settings = snapshot_settings(snapshot)
     colony = snapshot.colony
     title = f"{colony.cells.n} cells at t = {colony.time:.2f} doubling times ({describe_run(settings)})"  # the run's
+    if "cellmodeller.dt" in snapshot.extra:  # a CellModeller state (import-cellmodeller), or a run continuing one
+        extra = snapshot.extra
+        dt, step = float(extra["cellmodeller.dt"][0]), int(extra["cellmodeller.step"][0])
+        when = f"{colony.cells.n} cells at t = {colony.time:.4g} (CellModeller's time unit, its step {dt:g})"
+        title = (f"{when}: a CellModeller state (its step {step}), largest overlap "
+                 f"{float(extra['cellmodeller.max_overlap'][0]):.3g} of a diameter as measured"
+                 if snapshot.step == step + 1 else f"{when}; continued by qpcontact: {describe_run(settings)}")
     if statistics:
         title += "\n" + textwrap.fill(colony_statistics(snapshot, dimensions=settings.run.dimensions).summary(), 80)
     return colony_picture(Path(path), colony, snapshot.mechanics, settings, color, title)

@@ -22,7 +22,7 @@ The loop that calls the step function is :mod:`qpcontact.simulation.loop`.
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from functools import partial
 from typing import Any, NamedTuple
@@ -33,7 +33,7 @@ from ..colony.growth import Colony, grow, grow_position
 from ..colony.hooks import push
 from ..colony.pressure import PressureGrowth
 from ..errors import StepFailedError, TooManyContactsError
-from ..geometry import Cells
+from ..geometry import Cells, Plane
 from ..geometry.overlap import largest_overlap
 from ..timestep.mechanics import CellMechanics
 from ..timestep.position import CellMotion, ContactImpulses, PositionStepResult
@@ -98,7 +98,8 @@ def turning_reach(cells: Cells, dt: float) -> float:
     return float(speed.max(initial=0.0)) * dt
 
 
-def step_function(settings: Settings, extra: dict[str, np.ndarray], comm: Any = None) -> StepFunction:
+def step_function(settings: Settings, extra: dict[str, np.ndarray], comm: Any = None,
+                  planes: Sequence[Plane] | None = None) -> StepFunction:
     """The function :func:`run_colony` advances the colony with, once per step:
     ``take_step(colony, dt, drive=drive) -> StepOutcome`` (the colony after the step, whose
     cells divided before it; the step's result; the step taken; the rejected attempts).
@@ -110,10 +111,14 @@ def step_function(settings: Settings, extra: dict[str, np.ndarray], comm: Any = 
     The velocity-level step with retries (:func:`grow_with_retries`) keeps none; the position
     step (:func:`position_step_function`) keeps its contact impulses (``warm.*``). ``comm``: the
     MPI processes the position step is shared among (:func:`~qpcontact.timestep.position_step`).
+    ``planes``: the walls of the run (None: :meth:`Settings.planes`, the substrate in 3D).
     """
     if settings.run.step == "position":
-        return position_step_function(settings, extra, comm)
-    return partial(grow_with_retries, settings=settings, **settings.step_options())
+        return position_step_function(settings, extra, comm, planes)
+    options = settings.step_options()
+    if planes is not None:
+        options["planes"] = list(planes)
+    return partial(grow_with_retries, settings=settings, **options)
 
 
 #: The extra arrays of the position step's warm start (:class:`~qpcontact.timestep.ContactImpulses`).
@@ -124,7 +129,8 @@ WARM_ARRAYS = ("a", "b", "kind", "impulse")
 MOTION_ARRAYS = ("ids", "velocity", "turning")
 
 
-def position_step_function(settings: Settings, extra: dict[str, np.ndarray], comm: Any = None) -> StepFunction:
+def position_step_function(settings: Settings, extra: dict[str, np.ndarray], comm: Any = None,
+                           planes: Sequence[Plane] | None = None) -> StepFunction:
     """The position-level step of a run (:func:`qpcontact.colony.grow_position`): the substrate
     in 3D, the planar unknowns in 2D, the contact impulses and the cells' motion of each step kept
     in ``extra`` as the next one's warm start and predictor (and so restored on resume). A step that
@@ -140,7 +146,7 @@ def position_step_function(settings: Settings, extra: dict[str, np.ndarray], com
     if that fails, the first step stands and the history shows its overlap."""
     position, halvings = settings.position, settings.run.max_halvings
     planar = settings.run.dimensions == 2
-    planes = settings.planes()
+    planes = settings.planes() if planes is None else list(planes)
 
     def take_step(colony: Colony, dt: float, *, drive: np.ndarray | None = None) -> StepOutcome:
         warm = ContactImpulses(*(extra[f"warm.{name}"] for name in WARM_ARRAYS)) if "warm.a" in extra else None

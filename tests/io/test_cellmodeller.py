@@ -69,8 +69,16 @@ def test_a_run_folder_gives_its_last_step_with_what_cellmodeller_recorded():
     np.testing.assert_allclose(colony.rates[order] * colony.cells.lengths[order], expected["growth_rates"], rtol=1e-6)
     assert colony.next_id == expected["ids"].max() + 1 and np.all(colony.owed == 0)
     np.testing.assert_allclose(colony.cells.masses, qc.colony.volumes(colony.cells))
-    np.testing.assert_allclose(colony.cells.growth_inertia, 1000.0 * colony.cells.masses)
-    assert state.settings == {"run": {"dimensions": 2}, "model": {"rate_noise": 0.0, "radius": 0.5, "rate": 1.0}}
+    # the model's CLBacterium(gamma=100.): growth drag 100 against CellModeller's drag of motion muA·(l + 2ρ)
+    ratio = 100.0 / (np.median(colony.cells.lengths) + 1.0)
+    np.testing.assert_allclose(colony.cells.growth_inertia, ratio * colony.cells.masses)
+    target = float(np.median(colony.cell_data["targetVol"]))
+    assert state.settings == {"run": {"dimensions": 2}, "model": {"rate_noise": 0.0, "radius": 0.5, "rate": 1.0,
+                                                                  "growth_inertia_ratio": pytest.approx(ratio),
+                                                                  "division_length": target}}
+    assert any("not at each cell's targetVol" in note and "qpcontact cellmodeller MODEL.py --start" in note
+               for note in state.notes)
+    assert any("CellModeller's own unit" in note for note in state.notes)
 
 
 def test_the_models_own_per_cell_state_is_kept_and_what_is_not_is_named():
@@ -284,12 +292,16 @@ def test_types_3d_states_and_values_that_are_not_numbers(tmp_path):
     np.testing.assert_array_equal(state.colony.cell_types, [1, 0])
     np.testing.assert_array_equal(state.colony.parent_ids, [1, 1])
     assert state.colony.next_id == 5 and state.settings["run"]["dimensions"] == 3
-    assert state.settings["model"] == {"rate_noise": 0.0, "radius": 0.5, "type_rates": [1.0, 0.5]} and not state.notes
+    assert state.settings["model"] == {"rate_noise": 0.0, "radius": 0.5, "type_rates": [1.0, 0.5],
+                                       "growth_inertia_ratio": 1000.0}
+    assert [note.split(":")[0] for note in state.notes] == [
+        "the pickle holds no model with a CLBacterium(gamma=...)", "time is CellModeller's own unit (growthRate per that unit; its step dt 0.1), not qpcontact's doubling times"]
     assert state.left_out["label"].startswith("not a number") and state.left_out["signal"] == "only some cells have it"
     assert state.colony.cell_data == {}
     cells[1]["cellType"] = 2  # no cell of type 1: no rate for it
     state = read_cellmodeller(write_state(tmp_path / "step-00010.pickle", cells, 10, {3: 1, 4: 1}))
-    assert set(state.settings["model"]) == {"rate_noise", "radius"} and "share no growth rate" in state.notes[0]
+    assert set(state.settings["model"]) == {"rate_noise", "radius", "growth_inertia_ratio"}
+    assert "share no growth rate" in state.notes[0]
 
 
 def test_per_type_rates_are_continued_by_simulate(tmp_path, capsys):
