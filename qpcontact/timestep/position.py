@@ -35,8 +35,9 @@ the physics makes"):
   ``trust_rounds`` beyond meeting the tolerance), a cell whose turn goes back against its last
   one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
   diameters, the default until 2026-12, bent the colony);
-- *aim*: a linearization may aim at a gap of ``aim`` beyond each target, room for its own error;
-  contacts then rest at that gap, as if the cells were thicker, so the default is 0: contacts
+- *aim*: a linearization aims at a gap of ``aim`` beyond each target, room for its own error;
+  contacts then rest at that gap, as if the cells were thicker, so the default is 0.001 of a
+  diameter (not 0: contacts resting exactly on their constraint stalled the solver): contacts
   rest touching, and a linearization that left an overlap is followed by another;
 - *shrinking*: no cell gets shorter (growth can be compressed to zero, not reversed): the model.
 
@@ -111,10 +112,11 @@ class PositionSettings:
         0.05, unit="fraction of the pair's diameter", above=0,
         help="overlap present at the start of the step is removed by at most this much per step")
     aim: float = setting(
-        0.0, unit="fraction of the pair's diameter", at_least=0,
-        help="the gap the linearizations aim at beyond each contact's target, room for their error (contacts rest at it, as if "
-             "the cells were this much thicker: at 0.03 a 2D colony of 5,000 cells packed at 0.86, at 0.01 at 0.88, "
-             "at 0 at 0.89, docs/model-notes.md)")
+        0.001, unit="fraction of the pair's diameter", at_least=0,
+        help="the gap the linearizations aim at beyond each contact's target: contacts rest at it, as if the cells "
+             "were this much thicker (at 0.03, the default until 2026-12, a 2D colony of 5,000 cells packed at 0.86, "
+             "at 0.01 at 0.88, at 0 at 0.89); exactly 0 left contacts resting on their constraint, and the solver "
+             "stalled in a narrow channel (docs/model-notes.md)")
     trust_rounds: int = setting(
         2, unit="linearizations", at_least=0,
         help="linearizations a step takes beyond meeting the overlap tolerance while some cell's turn sits on its "

@@ -108,7 +108,7 @@ def test_the_api_reference_shows_the_one_description():
     (["--radius", "2"], "--division-length: must exceed 2 × radius = 4 µm"),
     (["--out", ""], "argument --out: expected a folder, got an empty path"),
     (["--position-solver", "linear"], "--position-solver: 'linear' takes no bounds"),
-    (["--position-trust", "1.5"], "argument --position-trust: expected a number in (0, 1], got 1.5"),
+    (["--position-trust", "0"], "argument --position-trust: expected a number > 0, got 0.0"),
     (["--vtk", "maybe"], "argument --vtk: cannot read 'maybe' as on or off"),
     (["--hook", "nosuch.py"], "nosuch.py: no such file"),
     # pressure-dependent growth and the picture's colour (issue 21)

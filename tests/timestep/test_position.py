@@ -74,11 +74,11 @@ def test_two_rods_end_to_end_are_pushed_apart_by_the_growth():
     assert -0.01 <= separation <= 1e-6
     assert np.allclose(out.cells.centers[:, 1:], 0.0) and np.allclose(out.cells.axes, [[1, 0, 0]] * 2)
     assert np.isclose(out.cells.centers[0, 0], -out.cells.centers[1, 0])
-    # With a fixed aim, the linearizations aim at that gap: the rods end that far apart (the
-    # default, 0, leaves them touching, above).
+    # The linearizations aim at a gap of aim: the rods end that far apart (0 leaves them
+    # touching, above; the default is 0.001).
     aimed = position_step(cells, dt, drive=drive, settings=PositionSettings(aim=0.03))
     gap = aimed.cells.centers[1, 0] - aimed.cells.centers[0, 0] - aimed.cells.lengths.mean() - 1.0
-    assert PositionSettings().aim == 0.0 and gap == pytest.approx(0.03, abs=1e-3)
+    assert PositionSettings().aim == 0.001 and gap == pytest.approx(0.03, abs=1e-3)
 
 
 def test_a_rod_sinking_onto_a_plane_comes_to_rest_on_it():
@@ -400,14 +400,15 @@ def test_a_deep_starting_overlap_is_relaxed_by_relaxation_per_step_as_the_docs_s
     assert re.search(r"removes only `relaxation`, 0\.05 of a diameter, of an overlap it starts with, so that no "
                      r"cell is thrown \(0\.3 deep: 0\.25, 0\.20, 0\.15, \.\.\., 0 after each step\)", usage)
     settings = qc.PositionSettings()
-    assert (settings.relaxation, settings.aim, settings.overlap_tolerance) == (0.05, 0.0, 0.01)
+    assert (settings.relaxation, settings.aim, settings.overlap_tolerance) == (0.05, 0.001, 0.01)
     cells = qc.Cells([[0.0, 0.0, 0.0], [0.0, 0.7, 0.0]], [1, 0, 0], 2.0, 0.5)  # 0.3 of a diameter deep
     overlaps = []
     for _ in range(8):
         out = qc.position_step(cells, 0.01, settings=settings)
         cells = out.cells
         overlaps.append(out.max_overlap)
-    assert overlaps[:3] == pytest.approx([0.3 - settings.relaxation * k for k in (1, 2, 3)], abs=0.002)
+    per_step = settings.relaxation + settings.aim  # the floor of a pair's target, and the aim beyond it
+    assert overlaps[:3] == pytest.approx([0.3 - per_step * k for k in (1, 2, 3)], abs=0.002)
     assert overlaps[-1] <= settings.overlap_tolerance
 
 
