@@ -266,7 +266,7 @@ def test_the_front_page_is_short_and_has_what_a_newcomer_needs():
     text = (ROOT / "README.md").read_text()
     assert len(text.splitlines()) <= 150
     assert 'pip install -e ".[all]" && qpcontact demo' in text and "\npython -m pytest -q " in text
-    for heading in ("## Grow a colony", "## Continue a CellModeller run", "## One contact solve in your own loop",
+    for heading in ("## Grow a colony", "## Run a CellModeller model, or continue its run", "## One contact solve in your own loop",
                     "## Commands"):
         assert heading in text, heading
     assert "qpcontact import-cellmodeller" in text and "qpcontact simulate --start" in text
