@@ -65,10 +65,11 @@ DUPLICATE_DISTANCE = 0.25
 #: distinct ends of their overlap within reach they lie side by side and keep those ends
 #: (:func:`select_contacts`). A single contact lets a pair turn about it through about θ before
 #: the far end of their overlap meets; a step turns a colony cell through up to about this
-#: much (its tips by at most 0.2–0.3 of a diameter: ``turn_limit`` of the position step,
-#: ``cfl`` of ``simulate --step velocity``; for rods of 1.5–4 µm and radius 0.5 µm, 0.1–0.25
-#: rad), so closer to parallel than this a single contact could let them turn through each
-#: other within one step. docs/model-notes.md, "Contacts of a pair".
+#: much (its tips by 0.2–0.3 of a diameter: the position step's cap until issue 32, ``cfl`` of
+#: ``simulate --step velocity``; for rods of 1.5–4 µm and radius 0.5 µm, 0.1–0.25 rad), so
+#: closer to parallel than this a single contact could let them turn through each other within
+#: one step; the position step, uncapped, finds a pair's contacts again at each linearization.
+#: docs/model-notes.md, "Contacts of a pair".
 SIDE_BY_SIDE_SINE = 0.2
 
 

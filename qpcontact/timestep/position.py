@@ -296,8 +296,8 @@ def _checked(cells: Cells, dt: float, drive: np.ndarray | None, planes: Sequence
     spec = get_solver(settings.solver)
     if settings.bounded and not spec.bounds:
         raise InvalidArgumentError(f"solver {settings.solver!r} takes no bounds on the unknowns; the position step "
-                                   "bounds turning and shrinking (use solver='ipm', or turn_limit=None and "
-                                   "allow_shrinking=True)")
+                                   "bounds turning and shrinking (use solver='ipm', or turn_limit=None, trust=None "
+                                   "and allow_shrinking=True)")
     planes = list(planes)
     for plane in planes:
         if not isinstance(plane, Plane):
