@@ -77,7 +77,7 @@ def test_a_foreign_state_with_overlaps_of_0_15_is_cleared_without_spinning(capsy
     overlaps = [float(row[1]) for row in rows]
     assert start > 0.14 and overlaps[-1] < 0.01  # the layer's rows overlap by 0.15 at the start
     assert all(b <= a + 1e-9 for a, b in zip([start, *overlaps], overlaps, strict=False))
-    assert max(float(row[2]) for row in rows) <= 0.1  # tips turned by at most a tenth of a diameter: not spun
+    assert max(float(row[2]) for row in rows) <= 0.5  # tips turned by less than half a diameter a step: not spun
 
 
 def test_a_cellmodeller_state_is_cleared_from_its_pickles(capsys):
@@ -87,7 +87,7 @@ def test_a_cellmodeller_state_is_cleared_from_its_pickles(capsys):
                        "--steps", "2") == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("64 cells, 2D, largest overlap 0.02")  # CellModeller leaves 0.02 diameters at 64 cells
-    assert lines[-1] == "largest overlap never grew, no cell turned beyond the limit"
+    assert lines[-1] == "largest overlap never grew, no cell's tips turned 0.5 of a diameter in a step"
 
 
 def test_a_colony_between_walls_stays_between_them(tmp_path, capsys):
