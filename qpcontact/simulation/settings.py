@@ -289,12 +289,18 @@ class Settings:
     def describe_step(self) -> str:
         """The step that runs, its solver and tolerance, in words (pictures, summaries):
         ``"position step, ipm at tolerance 0.001, overlap ≤ 0.01"``, and the search margin when
-        the scene picked it (``margin = none``: ``", search margin 0.75 (by the scene)"``)."""
+        the scene picked it (``margin = none``: ``", search margin 0.75 (by the scene)"``); a cap
+        on turning or an aim gap, which change the colony (docs/model-notes.md), when set
+        (``", turns capped at 0.2 diameters, aim 0.03"``)."""
         if self.run.step == "position":
             p = self.position
             chosen = "" if p.margin is not None else \
                 f", search margin {search_margin(p, self.run.dimensions == 2):g} (by the scene)"
-            return f"position step, {p.solver} at tolerance {p.tolerance:g}, overlap ≤ {p.overlap_tolerance:g}{chosen}"
+            bending = "" if p.turn_limit is None else f", turns capped at {p.turn_limit:g} diameters"
+            if p.aim != PositionSettings().aim:
+                bending += f", aim {p.aim:g}"
+            return (f"position step, {p.solver} at tolerance {p.tolerance:g}, overlap ≤ {p.overlap_tolerance:g}"
+                    f"{bending}{chosen}")
         v = self.velocity
         return f"velocity step, {v.solver}/{v.formulation} at tolerance {v.tolerance:g}"
 

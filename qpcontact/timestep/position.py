@@ -26,8 +26,9 @@ a new ``x``::
 which is the system of :func:`qpcontact.assembly.build_system` with that right-hand side. The
 step stops when every contact meets its target to within ``overlap_tolerance`` (measured with
 the true distance at the re-detected positions, not the linearization). What keeps the
-linearizations honest changes their number, not the physics (docs/model-notes.md, "The colony
-the physics makes"):
+linearizations honest is meant to change their number, not the physics (docs/model-notes.md,
+"The colony the physics makes"; a turn still on its trust region after ``trust_rounds`` more
+linearizations is kept as it is, and counted in the result's ``turn_limited``):
 
 - *trust regions*: in one linearization a cell's tips move by turning at most ``trust``
   diameters from where the last one left them (turns are where a linearization is poor); a cell

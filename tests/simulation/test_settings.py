@@ -340,3 +340,7 @@ def test_the_step_in_words_names_the_search_margin_the_scene_picked():
     assert Settings().describe_step().endswith(", search margin 0.75 (by the scene)")
     assert Settings().updated({"dimensions": 3}).describe_step().endswith(", search margin 0.5 (by the scene)")
     assert "search margin" not in Settings().updated({"position_margin": 0.4}).describe_step()  # given: in config
+    # What changes the colony is named (issue 32): a cap on turning, an aim other than the default.
+    assert "capped" not in Settings().describe_step() and "aim" not in Settings().describe_step()
+    bent = Settings().updated({"position_turn_limit": 0.2, "position_aim": 0.03}).describe_step()
+    assert ", turns capped at 0.2 diameters, aim 0.03" in bent
