@@ -120,24 +120,13 @@ def configure(args: argparse.Namespace) -> tuple[Settings, grids.Grid, list[Laye
 # ------------------------------------------------------------------------------------------
 # The sweep's own files
 # ------------------------------------------------------------------------------------------
-class Sweep:
+class Sweep(tasks.PlanFolder):
     """A sweep's folder: ``sweep.json`` (the runs and their status), the run folders, the
     summary and the ensemble picture."""
-
-    def __init__(self, out: Path, document: dict[str, Any]):
-        self.out = out
-        self.document = document
-
-    @property
-    def runs(self) -> list[dict[str, Any]]:
-        return self.document["runs"]
 
     @property
     def varied(self) -> list[str]:
         return list(self.runs[0]["varied"]) if self.runs else []
-
-    def folder(self, run: Mapping[str, Any]) -> Path:
-        return self.out / "runs" / run["name"]
 
     @classmethod
     def new(cls, out: Path, runs: list[dict[str, Any]], base: Settings, grid: grids.Grid) -> Sweep:

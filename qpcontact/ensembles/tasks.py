@@ -206,3 +206,22 @@ def _run(name: str, values: Mapping[str, Any], path: Path) -> dict[str, Any]:
     write_text(path / RESULT_FILE, json.dumps(outcome, indent=1, default=float) + "\n")
     _event(name, "finished")
     return outcome
+
+
+class PlanFolder:
+    """A folder of runs planned in one JSON document (``document["runs"]``, each with its
+    ``name``), each run in ``runs/NAME/``: what a sweep (:class:`~.sweep.Sweep`) and a convergence
+    study (:class:`qpcontact.studies.convergence.Study`) share."""
+
+    def __init__(self, out: Path, document: dict[str, Any]):
+        self.out = out
+        self.document = document
+
+    @property
+    def runs(self) -> list[dict[str, Any]]:
+        return self.document["runs"]
+
+    def folder(self, run: Mapping[str, Any]) -> Path:
+        """The folder of one of the runs."""
+        return self.out / "runs" / run["name"]
+

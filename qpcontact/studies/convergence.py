@@ -43,7 +43,7 @@ import numpy as np
 from ..cli import comma_list, non_negative_int, output_folder, positive_float, run_standalone
 from ..colony.statistics import DEFINITIONS, colony_statistics
 from ..ensembles.grid import grid_layer, run_name
-from ..ensembles.tasks import ATTEMPTS_FILE, LOCK_FILE, RESULT_FILE, read_json, run_task
+from ..ensembles.tasks import ATTEMPTS_FILE, LOCK_FILE, RESULT_FILE, PlanFolder, read_json, run_task
 from ..errors import InvalidArgumentError, OutputFolderError
 from ..io.outputs import describe_written, prepare_folder, replacing, write_csv, write_text
 from ..io.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder
@@ -92,24 +92,13 @@ def plan_runs(base: Settings, steps: Sequence[float], seeds: Sequence[int]) -> l
     return runs
 
 
-class Study:
+class Study(PlanFolder):
     """A study's folder: ``convergence.json`` (the plan and each run's status) and the runs'
     folders."""
-
-    def __init__(self, out: Path, document: dict[str, Any]):
-        self.out = out
-        self.document = document
-
-    @property
-    def runs(self) -> list[dict[str, Any]]:
-        return self.document["runs"]
 
     @property
     def dimensions(self) -> int:
         return int(self.document["base"]["run"]["dimensions"])
-
-    def folder(self, run: Mapping[str, Any]) -> Path:
-        return self.out / "runs" / run["name"]
 
     @classmethod
     def new(cls, out: Path, base: Settings, steps: Sequence[float], seeds: Sequence[int]) -> Study:
