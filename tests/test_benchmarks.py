@@ -106,3 +106,22 @@ def test_the_step_profile_writes_its_phase_table(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     rows = [line for line in out.read_text().splitlines() if line.startswith("| step_")]
     assert len(rows) == 1 and "%" in rows[0]
+
+
+def test_the_step_error_compares_one_step_with_substeps(tmp_path):
+    """benchmarks/step_error.py on a small 3D biofilm: a row per scale, and at a tenth of the
+    run's step one step and its substeps agree (the reference it stands on)."""
+    from qpcontact.io.runs import RunFolder, latest_snapshot
+    from qpcontact.simulation import Settings, run_colony
+
+    folder = RunFolder.create(tmp_path / "run")
+    run_colony(Settings().updated({"cells": 60, "dimensions": 3}), progress=False, folder=folder)
+    out = tmp_path / "error.md"
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "step_error.py"), str(latest_snapshot(tmp_path / "run")),
+                           "--scales", "1", "0.1", "--substeps", "2", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = [line.split("|") for line in out.read_text().splitlines() if line.startswith("| 1 |") or line.startswith("| 0.1 |")]
+    assert len(rows) == 2
+    rms_small = float(rows[1][8])
+    assert rms_small < 0.01, rows[1]
