@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     snapshot = load_snapshot(args.state)
     settings = Settings.from_stored(snapshot.settings, args.state)
     rows = [compare(snapshot.colony, settings, scale, args.substeps) for scale in args.scales]
-    report = table(args.state, snapshot.colony.cells.n, settings.run.dimensions, settings.run.growth_per_step,
+    report = table(args.state, snapshot.colony.cells.n, settings.run.dimensions, settings.growth_per_step(),
                    args.substeps, rows)
     Path(args.out).write_text(report)
     print(report)

@@ -180,7 +180,7 @@ def flags_to_try(settings: Settings) -> str:
     """What to change when a run's step fails, as the flags of ``qpcontact simulate`` (and TOML
     keys) with their current values: the end of a failed run's message."""
     run = settings.run
-    smaller = (f"--growth-per-step {run.growth_per_step / 2:g}" if settings.time_step_rule() == "growth"
+    smaller = (f"--growth-per-step {settings.growth_per_step() / 2:g}" if settings.time_step_rule() == "growth"
                else f"--max-dt {run.max_dt / 2:g}")
     if run.step == "position":
         p = settings.position

@@ -71,8 +71,9 @@ TABLED = {2: (*REPORTED[2], "order", "length_mean", "length_sd", "aspect_ratio",
               "aspect_ratio")}
 #: What each run costs, from its history.
 COSTS = ("run_seconds", "steps", "linearizations")
-#: Default step sizes: the default step (0.05) and two halvings.
-DEFAULT_STEPS = (0.0125, 0.025, 0.05)
+#: Default step sizes: the run's growth per step (the scene's by default: 0.05 in 2D, 0.0125 in
+#: 3D) divided by each of these.
+DEFAULT_DIVISORS = (4, 2, 1)
 
 
 # ------------------------------------------------------------------------------------------
@@ -327,8 +328,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_setting_flags(parser, " (every run's, as in qpcontact simulate)")
     study.add_argument("--growth-per-step", dest="steps", type=comma_list(positive_float), metavar="LIST",
                        help="comma-separated growth time steps (growth of the fastest cell per step, a fraction of "
-                            "its length), two or more; the finest is the reference (default: "
-                            f"{','.join(map(str, DEFAULT_STEPS))})")
+                            "its length), two or more; the finest is the reference (default: the run's growth per "
+                            "step and two halvings: 0.0125,0.025,0.05 in 2D, 0.003125,0.00625,0.0125 in 3D)")
 
 
 def configure(args: argparse.Namespace) -> tuple[Settings, list[float], list[int]]:
@@ -347,7 +348,7 @@ def configure(args: argparse.Namespace) -> tuple[Settings, list[float], list[int
     if base.output.snapshot_every == 0:
         raise InvalidArgumentError("--snapshot-every 0: a run cut short continues from its latest snapshot; give a "
                                    "number of steps >= 1")
-    steps = list(args.steps or DEFAULT_STEPS)
+    steps = list(args.steps or [base.growth_per_step() / k for k in DEFAULT_DIVISORS])
     if len(steps) < 2 or len(set(steps)) != len(steps):
         raise InvalidArgumentError(f"--growth-per-step: expected two or more different step sizes (the finest is the "
                                    f"reference), got {','.join(map(str, steps))}")

@@ -12,6 +12,9 @@ import numpy as np
 import pytest
 
 from qpcontact import cli
+from qpcontact.colony.growth import Colony
+from qpcontact.errors import InvalidArgumentError
+from qpcontact.geometry import Cells
 from qpcontact.io.runs import read_toml
 from qpcontact.io.snapshots import load_snapshot, save_colony
 from qpcontact.schema import find_setting, settings_of
@@ -301,7 +304,7 @@ def test_the_color_flag_colours_colony_png_by_pressure_and_the_default_by_orient
     assert "2D pressure [F/µm]" in label and "position step, ipm" in title
     assert read_toml(tmp_path / "pressure" / "config.toml")["output"]["color"] == "pressure"
     title, _, _ = drawn["slowed"]
-    assert title.endswith("overlap ≤ 0.01, search margin 0.75 (by the scene)\npressure growth exponential, "
+    assert title.endswith("overlap ≤ 0.01, search margin 0.75 (by the scene), growth per step 0.05 (by the scene)\npressure growth exponential, "
                           "stall pressure 3 F/µm)")  # names what ran
     for name in drawn:
         assert (tmp_path / name / "colony.png").stat().st_size > 1000
@@ -336,11 +339,25 @@ def test_a_config_file_with_the_pressure_settings(tmp_path, capsys):
     assert "[model] pressure_growth: expected one of off, linear, exponential, got 'fast'" in capsys.readouterr().err
 
 
-def test_the_step_in_words_names_the_search_margin_the_scene_picked():
-    assert Settings().describe_step().endswith(", search margin 0.75 (by the scene)")
-    assert Settings().updated({"dimensions": 3}).describe_step().endswith(", search margin 0.5 (by the scene)")
-    assert "search margin" not in Settings().updated({"position_margin": 0.4}).describe_step()  # given: in config
+def test_the_step_in_words_names_the_search_margin_and_the_step_the_scene_picked():
+    assert Settings().describe_step().endswith(", search margin 0.75 (by the scene), growth per step 0.05 (by the scene)")
+    assert Settings().updated({"dimensions": 3}).describe_step().endswith(
+        ", search margin 0.5 (by the scene), growth per step 0.0125 (by the scene)")
+    given = Settings().updated({"position_margin": 0.4, "growth_per_step": 0.1}).describe_step()
+    assert "search margin" not in given and "growth per step" not in given  # given: in config
     # What changes the colony is named (issue 32): a cap on turning, an aim other than the default.
     assert "capped" not in Settings().describe_step() and "aim" not in Settings().describe_step()
     bent = Settings().updated({"position_turn_limit": 0.2, "position_aim": 0.03}).describe_step()
     assert ", turns capped at 0.2 diameters, aim 0.03" in bent
+
+
+def test_the_growth_step_is_the_scenes_unless_given():
+    """Issue 32: 0.05 in 2D, 0.0125 in 3D (the 3D biofilm is bent at 0.05), or the setting."""
+    colony = Colony.founder(Cells(centers=[[0.0, 0.0, 0.5]], axes=[[1.0, 0.0, 0.0]], lengths=2.0, radii=0.5), 0.7)
+    rate = 0.7
+    assert Settings().time_step_of(colony) == pytest.approx(np.log1p(0.05) / rate)
+    assert Settings().updated({"dimensions": 3}).time_step_of(colony) == pytest.approx(np.log1p(0.0125) / rate)
+    assert Settings().updated({"dimensions": 3, "growth_per_step": 0.05}).time_step_of(colony) == \
+        pytest.approx(np.log1p(0.05) / rate)
+    with pytest.raises(InvalidArgumentError, match="growth_per_step"):
+        Settings().updated({"growth_per_step": 0.0})

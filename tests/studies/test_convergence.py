@@ -130,3 +130,15 @@ def test_a_failed_run_is_reported_by_name_and_the_others_all_the_same(tmp_path, 
     assert coarse["packing_mean"] == "nan" and float(finest["packing_mean"]) > 0.5
     statuses = {r["name"]: (r["status"], r["error"]) for r in read_rows(out / convergence.RUNS_FILE)}
     assert statuses["growth_per_step-0.1__seed-1"] == ("failed", "TooManyContactsError: 2.4e6 candidate pairs")
+
+
+@pytest.mark.parametrize("dimensions, steps", [("2", [0.0125, 0.025, 0.05]), ("3", [0.003125, 0.00625, 0.0125])])
+def test_the_default_steps_are_the_scenes_step_and_two_halvings(dimensions, steps):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    convergence.add_arguments(parser)
+    _, chosen, _ = convergence.configure(parser.parse_args(["--dimensions", dimensions]))
+    assert sorted(chosen) == pytest.approx(steps)
+    _, given, _ = convergence.configure(parser.parse_args(["--dimensions", dimensions, "--growth-per-step", "0.1,0.2"]))
+    assert sorted(given) == [0.1, 0.2]
