@@ -363,7 +363,7 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np
     key_a, key_b = progress.found.keyed(ids)
     initial = system.from_contact_impulses(progress.last.lookup(key_a, key_b, progress.found.kind)) \
         if spec.warm_start else None
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     options = None if comm is None else {"comm": comm}
     if options is not None and system.owned_rows is not None:
         owner = system.split.owner
@@ -372,6 +372,7 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np
     out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial,
                 settings=options)
     times["solve"] += time.perf_counter() - t0
+    times["solve_cpu"] += time.process_time() - c0
     progress.solver_iterations += out.iterations or 0
     refused = "" if out.y is None or not out.found else acceptance_failure(
         system, "complementarity", out.y, out.lam, settings.tolerance, problem.lower, problem.upper)
@@ -480,10 +481,11 @@ def position_step(
         converged, message = _verdict(progress, excess, iteration, settings)
         if converged or message:
             break
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         linear = _linearize(cells, now, contacts, target, settings.aim * diameter, dt, drive,
                             progress.impulses, planar, settings, progress.radius, step.split)
         step.times["assemble"] += time.perf_counter() - t0
+        step.times["assemble_cpu"] += time.process_time() - c0
         if linear is None:  # nothing asks for a push: the free motion is the answer
             progress.impulses, progress.last, progress.trusting = np.zeros((cells.n, 7)), ContactImpulses.empty(), 0
             continue
@@ -493,6 +495,7 @@ def position_step(
             break
     # The loop always ends on a detection at the positions of the impulses it kept.
     step.times["total"] = time.perf_counter() - step.started
+    step.times["total_cpu"] = time.process_time() - step.started_cpu
     result = _result(progress, cells, now, contacts, diameter, converged, iteration, excess, start_overlap, ids, dt,
                      drive, message, step.times)
     if not converged and on_failure == "raise":
@@ -519,6 +522,7 @@ class _Step:
     floors: Floors
     times: dict[str, float]
     started: float
+    started_cpu: float
 
 
 def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], planar: bool, settings: PositionSettings,
@@ -527,7 +531,7 @@ def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], plan
     """The step's set-up: the search's reach, the free motion and the prediction, one broad phase
     for both and the start (:func:`first_pairs`), the floors of the pairs that start overlapping;
     ``(step, start_overlap)``."""
-    started = time.perf_counter()
+    started, started_cpu = time.perf_counter(), time.process_time()
     form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
     reach = search_margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if cells.n else 0.0
     free = move(cells, dt, drive)
@@ -536,16 +540,17 @@ def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], plan
     split.own(cells)  # the slabs that own the cells (rows, unknowns) for the whole step
     candidates = first_pairs(cells, free, predicted, reach, split)
     floors, start_overlap = start_floors(cells, planes, planar, span, settings.relaxation, candidates, split)
-    times = {"detect": time.perf_counter() - started, "assemble": 0.0, "solve": 0.0}
+    times = {"detect": time.perf_counter() - started, "assemble": 0.0, "solve": 0.0,
+             "detect_cpu": time.process_time() - started_cpu, "assemble_cpu": 0.0, "solve_cpu": 0.0}
     return _Step(cells, dt, drive, settings, planes, planar, form, reach, span, split, predicted, candidates, floors, times,
-                 started), start_overlap
+                 started, started_cpu), start_overlap
 
 
 def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Contacts, np.ndarray, bool]:
     """Move the cells with the impulses so far, find and evaluate the contacts there and judge
     the iterate (:func:`_judge`); ``(now, contacts, diameter, backtracked)``."""
     now = move(step.cells, step.dt, step.drive + progress.impulses)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     known = progress.found.keys
     first = iteration == 0  # the first linearization also searches where the last step's motion goes
     progress.found = track(progress.found, now, step.predicted if first else None, step.planes, step.reach, step.span,
@@ -553,6 +558,7 @@ def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Cont
     contacts = evaluate(now, progress.found, step.planes, step.planar, step.split)
     diameter = diameters(now, contacts)
     step.times["detect"] += time.perf_counter() - t0
+    step.times["detect_cpu"] += time.process_time() - c0
     return now, contacts, diameter, _judge(progress, contacts, diameter, known, iteration, step.settings)
 
 
