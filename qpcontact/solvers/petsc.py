@@ -330,7 +330,8 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
     assert part.lam is not None
     y = _gather(part.y, partition.column_order, partition.column_counts, comm)
     lam = _gather(part.lam, partition.row_order, partition.row_counts, comm)
-    COUNTERS["gathered_bytes"] += 8.0 * (part.y.size + part.lam.size)
+    if comm.Get_size() > 1:
+        COUNTERS["gathered_bytes"] += 8.0 * (part.y.size + part.lam.size)
     return IterativeSolution(y, lam, part.iterations, part.converged, part.status, part.residual,
                              time.perf_counter() - start)
 

@@ -224,19 +224,24 @@ def test_ctrl_c_of_mpiexec_saves_the_state_reached_on_every_process(tmp_path):
 
 
 def test_the_scaling_benchmark_measures_and_compares(grown, tmp_path):
-    """benchmarks/mpi_scaling.py on small states: the agreement of 2 processes with one, and the
-    table written where it is told."""
+    """benchmarks/mpi_scaling.py on a small state: a line per process count with every process's
+    numbers, the agreement of 2 processes with one, and the table written where it is told."""
     states = tmp_path / "states"
     states.mkdir()
-    shutil.copy(grown[2], states / "2d-3000.npz")
-    shutil.copy(grown[3], states / "3d-1000.npz")
-    out = tmp_path / "scaling.md"
+    shutil.copy(grown[2], states / "2d-small.npz")
+    out = tmp_path / "measured"
     done = subprocess.run([sys.executable, str(HERE.parents[1] / "benchmarks" / "mpi_scaling.py"), "--states",
-                           str(states), "--steps", "1", "--out", str(out)], capture_output=True, text=True,
-                          env=environment(), timeout=600, cwd=tmp_path)
+                           str(states), "--names", "2d-small", "--steps", "1", "--processes", "1,2", "--folder",
+                           str(out)], capture_output=True, text=True, env=environment(), timeout=600, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
-    rows = [line for line in out.read_text().splitlines() if line.startswith(("| 2d-3000", "| 3d-1000"))]
-    assert len(rows) == 2
-    for row in rows:
-        cells = [c.strip() for c in row.strip("|").split("|")]
-        assert cells[2] == "yes" and float(cells[3]) <= CONTRACT
+    text = (out / "mpi-scaling.md").read_text()
+    assert sum(line.startswith("| 2d-small |") for line in text.splitlines()) == 3 + 1  # 3 runs, 1 agreement
+    agreement = [line for line in text.splitlines() if line.startswith("| 2d-small | 2 |")]
+    cells = [c.strip() for c in agreement[0].strip("|").split("|")]
+    assert cells[3] == "yes" and float(cells[4]) <= ROUNDING
+    import json
+
+    numbers = json.loads((out / "mpi-scaling.json").read_text())["per_process"]
+    two = numbers["2d-small, 2 MPI processes, ipm-petsc"]
+    assert len(two["cpu"]) == 2 and all(c > 0 for c in two["cpu"]) and all(f > 0 for f in two["flops"])
+    assert all(b > 0 for b in two["sent"]) and all(m > 0 for m in two["memory"])
