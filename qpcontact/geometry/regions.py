@@ -18,8 +18,10 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InvalidArgumentError
 from .cells import Cells
 from .contacts import candidate_pairs
+from .motion import move
 
 
 def halo_width(cells: Cells, margin: float, slack: np.ndarray | None = None) -> float:
@@ -138,6 +140,35 @@ class Split:
         """This process's contiguous part of ``count`` items (parts in the order of the processes)."""
         bounds = np.linspace(0, count, self.size + 1).astype(np.intp)
         return slice(int(bounds[self.rank]), int(bounds[self.rank + 1]))
+
+    def moved(self, cells: Cells, dt: float, momenta: np.ndarray) -> Cells:
+        """:func:`~qpcontact.geometry.motion.move` of the cells, each process moving those it owns
+        (:attr:`owner`) and the moved positions, axes and lengths put together in every process
+        (7 numbers a cell, in one ``Allgatherv``).
+
+        Raises:
+            InvalidArgumentError: as :func:`~qpcontact.geometry.motion.move`, in every process.
+        """
+        if self.size == 1 or self.owner is None:
+            return move(cells, dt, momenta)
+        mine = np.flatnonzero(self.owner == self.rank)
+        failed: InvalidArgumentError | None = None
+        try:
+            part = move(cells.subset(mine), dt, momenta[mine])
+            local = np.column_stack([part.centers, part.axes, part.lengths])
+        except InvalidArgumentError as exc:  # told to every process, or the others would wait for ever
+            failed, local = exc, np.zeros((mine.size, 7))
+        if self.most(float(failed is not None)):
+            raise failed or InvalidArgumentError(f"dt = {dt!r}: a cell of another process would move, turn or "
+                                                 "shrink beyond what a step allows (its message is that process's)")
+        counts = np.bincount(self.owner, minlength=self.size) * 7
+        whole = np.empty(cells.n * 7)
+        self.comm.Allgatherv(np.ascontiguousarray(local).ravel(), [whole, counts])
+        SENT["bytes"] += local.nbytes
+        out = np.empty((cells.n, 7))
+        out[np.argsort(self.owner, kind="stable")] = whole.reshape(-1, 7)
+        return cells.replace(momenta=momenta[:, 0:3], angular_momenta=momenta[:, 3:6], growth_momenta=momenta[:, 6],
+                             centers=out[:, :3], axes=out[:, 3:6], lengths=out[:, 6])
 
     def gather(self, part: Any) -> list[Any]:
         """Every process's ``part``, in the order of the processes, in every process."""

@@ -534,10 +534,10 @@ def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], plan
     started, started_cpu = time.perf_counter(), time.process_time()
     form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
     reach = search_margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if cells.n else 0.0
-    free = move(cells, dt, drive)
-    predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
     split, span = Split(comm), cells.n + len(planes) + 1
-    split.own(cells)  # the slabs that own the cells (rows, unknowns) for the whole step
+    split.own(cells)  # the slabs that own the cells (moves, rows, unknowns) for the whole step
+    free = split.moved(cells, dt, drive)
+    predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
     candidates = first_pairs(cells, free, predicted, reach, split)
     floors, start_overlap = start_floors(cells, planes, planar, span, settings.relaxation, candidates, split)
     times = {"detect": time.perf_counter() - started, "assemble": 0.0, "solve": 0.0,
@@ -549,7 +549,7 @@ def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], plan
 def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Contacts, np.ndarray, bool]:
     """Move the cells with the impulses so far, find and evaluate the contacts there and judge
     the iterate (:func:`_judge`); ``(now, contacts, diameter, backtracked)``."""
-    now = move(step.cells, step.dt, step.drive + progress.impulses)
+    now = step.split.moved(step.cells, step.dt, step.drive + progress.impulses)
     t0, c0 = time.perf_counter(), time.process_time()
     known = progress.found.keys
     first = iteration == 0  # the first linearization also searches where the last step's motion goes
