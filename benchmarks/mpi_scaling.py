@@ -233,6 +233,7 @@ def main(argv: list[str] | None = None) -> None:
             t = time.perf_counter()
             result = measure(state, args.steps, solver, processes, scratch / f"{name}-{solver}-{processes}.npz")
             values = per_process(result)
+            values["cells"] = [float(result[0]["rows"][0]["cells"])]
             if solver == "ipm-petsc" and processes == 1:
                 reference = values["other"][0]
             raw[f"{name}, {label}"] = values
