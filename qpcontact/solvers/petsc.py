@@ -1,10 +1,11 @@
 """ipm-petsc: the interior point of :mod:`.ipm` over MPI processes, on PETSc's distributed objects.
 
-Under ``mpiexec -n P``, every process holds the same problem (the colony's state and its contact
-system are replicated, docs/distributed.md); this solver splits it: the cells (the groups of
-columns of ``B̃`` with the same rows, :func:`~qpcontact.solvers.cholesky.column_groups`) are
-partitioned by METIS into P connected regions of the contact graph, each process owns the unknowns
-of its cells and the contact rows whose first cell is its own, and the iterations of
+Under ``mpiexec -n P``, every process holds the same problem (the colony's state is replicated,
+docs/distributed.md; in the position step each process assembles only its own rows of it); this
+solver splits it: each process owns the unknowns of some cells and some contact rows (the position
+step's slabs, given as ``owners``; or, in a direct call, the cells, the groups of columns of ``B̃``
+with the same rows, :func:`~qpcontact.solvers.cholesky.column_groups`, partitioned by METIS into P
+connected regions of the contact graph, each row with its first cell), and the iterations of
 :func:`qpcontact.solvers.ipm.iterate_rows` run on those parts:
 
 - the products with ``B̃`` and ``B̃ᵀ`` are PETSc's (an MPIAIJ matrix; the halo of unknowns that
