@@ -152,7 +152,7 @@ def test_a_run_saved_on_four_processes_continues_on_two_and_on_one(grown, tmp_pa
     steps_from(grown[2], tmp_path / "parts", 2, processes=4)
     two = simulate("--resume", "--max-steps", str(start + 3), "--cells", "100000", "--out", str(tmp_path / "parts"),
                    processes=2)
-    assert two.returncode == 3 and "running on 2 MPI processes" in two.stderr
+    assert two.returncode == 3 and "on 2 MPI processes" in two.stdout
     done = simulate("--resume", "--max-steps", str(start + 4), "--cells", "100000", "--position-solver", "ipm",
                     "--out", str(tmp_path / "parts"))
     assert done.returncode == 3 and "position_solver: ipm-petsc -> ipm" in done.stderr
