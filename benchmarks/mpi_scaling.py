@@ -1,26 +1,26 @@
-"""One colony over MPI processes: time per step, memory per process, and agreement with one process.
+"""One colony over MPI processes, measured per process: CPU seconds of each phase, MUMPS's flops and
+factor, bytes sent, peak memory, at P = 1, 2, 4, 8, and agreement with one process.
 
-    python benchmarks/mpi_scaling.py --states DIR [--steps 3] [--out mpi-scaling.md]
+    python benchmarks/mpi_scaling.py --states DIR [--steps 2] [--processes 1,2,4,8] [--folder OUT]
 
 Run with the distributed stack's Python (``scripts/install-mpi VENV``; ``VENV/bin/python``). DIR holds
-grown colonies as ``qpcontact bench-grown`` caches them (``2d-10000.npz``, ``2d-20000.npz``,
-``3d-5000.npz`` for the scaling; ``2d-3000.npz`` and ``3d-1000.npz`` for the agreement; missing ones
-are left out and said). Each measurement is a child, in one process or under ``mpiexec -n P``, that
-takes one step from the state untimed (its warm start and predictor), then times ``--steps`` steps of
-the run's own step function (``simulate``'s), each from the last:
+grown colonies as ``qpcontact bench-grown`` caches them (``--names``, default ``2d-20000`` and
+``3d-5000``; missing ones are left out and said). Each measurement is a child, in one process with
+``ipm`` (CHOLMOD, the default) or under ``mpiexec -n P`` with ``ipm-petsc`` (MUMPS), that takes one
+step from the state untimed (its warm start and predictor), then ``--steps`` steps of the run's own
+step function (``simulate``'s), each from the last; every process reports its own numbers:
 
-- *strong scaling*: the same state in one process with ``ipm`` (CHOLMOD, the default), on one MPI
-  process and on two with ``ipm-petsc`` (MUMPS), and (2D) on two with detection repeated in each
-  process instead of shared by region (the path before it was shared), each step by phase;
-- *weak scaling*: ``2d-10000`` on one process against ``2d-20000`` on two;
-- *memory*: each process's peak resident memory (``ru_maxrss``) at the end;
-- *agreement*: the end positions of ``--steps`` steps on two processes against one process's, in
-  diameters (the tips of every cell), and the cells' ids;
-- *alike runs* (``--grow N``): whole 2D runs from one cell to N cells in one process and on two:
-  wall time, steps, time to size, largest overlap, the radial pressure profile.
+- CPU seconds (``time.process_time``) of the step, of detection, assembly and the solve, and of
+  MUMPS's factorizations within it;
+- MUMPS's flops of elimination on that process (RINFO(3)) and its factor entries (INFO(9));
+- the bytes it sent (qpcontact's collectives, the halo of the products with ``B̃``, the gathered
+  answer);
+- its peak resident memory (``ru_maxrss``);
+- *agreement*: the end positions on P processes against one process's, in diameters, and the ids;
+- *alike runs* (``--grow N``): whole 2D runs from one cell to N cells in one process and on two.
 
-Prints a Markdown table and writes it to ``--out`` (default ``./mpi-scaling.md``), with the date, the
-commit, the machine and its load.
+Prints a Markdown table and writes it, with every process's numbers as JSON, under ``--folder``
+(default ``./mpi-scaling``), with the date, the commit, the machine and its load.
 """
 
 from __future__ import annotations
@@ -44,45 +44,52 @@ from profile_step import version  # noqa: E402  (the commit of the qpcontact the
 CHILD = r"""
 import json, resource, sys, time
 import numpy as np
+from qpcontact.geometry import regions
 from qpcontact.io import load_colony
 from qpcontact.simulation import Settings
 from qpcontact.simulation.steps import sink_drive, step_function
 
 state, steps, how, ends = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
 solver = "ipm" if how == "ipm" else "ipm-petsc"
-comm = None
+comm = petsc = None
 if solver == "ipm-petsc":
+    from qpcontact.solvers import petsc
     from qpcontact.solvers.petsc import world
     comm = world()
 colony, _ = load_colony(state)
 three_d = bool(np.any(colony.cells.centers[:, 2] != 0))
 settings = Settings().updated({"dimensions": 3 if three_d else 2, "position.solver": solver}, "mpi-scaling")
-extra = {}
-# "repeated": the solve split, detection in every process (as before it was shared by region)
-take_step = step_function(settings, extra, None if how == "repeated" else comm)
+take_step = step_function(settings, {}, comm)
 
 colony = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony)).colony
 rows = []
 for _ in range(steps):
     if comm is not None:
         comm.Barrier()
-    t = time.perf_counter()
+        petsc.reset_counters()
+    regions.SENT["bytes"] = 0
+    t, cpu = time.perf_counter(), time.process_time()
     outcome = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony))
-    total = time.perf_counter() - t
-    result = outcome.result
-    rows.append(dict(cells=colony.cells.n, total=total, solve=result.times["solve"], detect=result.times["detect"],
-                     assemble=result.times["assemble"],
-                     linearizations=result.iterations, solver_iterations=result.solver_iterations,
-                     max_overlap=result.max_overlap))
+    total, total_cpu = time.perf_counter() - t, time.process_time() - cpu
+    times, counters = outcome.result.times, dict(petsc.COUNTERS) if petsc else {}
+    sent = regions.SENT["bytes"] + counters.get("halo_bytes", 0.0) + counters.get("gathered_bytes", 0.0)
+    rows.append(dict(cells=colony.cells.n, total=total, cpu=total_cpu, detect=times["detect_cpu"],
+                     assemble=times["assemble_cpu"], solve=times["solve_cpu"],
+                     factor=counters.get("factor_cpu", float("nan")), flops=counters.get("factor_flops", float("nan")),
+                     entries=counters.get("factor_entries", float("nan")),
+                     mumps_mb=counters.get("factor_memory_mb", float("nan")), sent=sent,
+                     linearizations=outcome.result.iterations, solver_iterations=outcome.result.solver_iterations,
+                     max_overlap=outcome.result.max_overlap))
     colony = outcome.colony
 memory = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # MiB
-memories = [memory] if comm is None else comm.gather(memory, root=0)
+mine = dict(rows=rows, memory=memory)
+every = [mine] if comm is None else comm.gather(mine, root=0)
 if comm is None or comm.Get_rank() == 0:
     c = colony.cells
     np.savez(ends, ids=colony.ids, tips=np.concatenate([c.centers + 0.5 * c.lengths[:, None] * c.axes,
                                                         c.centers - 0.5 * c.lengths[:, None] * c.axes]),
              diameter=2.0 * float(np.median(c.radii)))
-    print(json.dumps(dict(rows=rows, memory=memories)))
+    print(json.dumps(every))
 """
 
 
@@ -93,8 +100,8 @@ def environment() -> dict[str, str]:
     return env
 
 
-def measure(state: Path, steps: int, solver: str, processes: int, ends: Path) -> dict:
-    """One child: its timed steps and each process's peak memory."""
+def measure(state: Path, steps: int, solver: str, processes: int, ends: Path) -> list[dict]:
+    """One child: each process's timed steps and peak memory, in the order of the processes."""
     command = [sys.executable, "-c", CHILD, str(state), str(steps), solver, str(ends)]
     if solver != "ipm":
         command = ["mpiexec", "-n", str(processes), *command]
@@ -102,6 +109,15 @@ def measure(state: Path, steps: int, solver: str, processes: int, ends: Path) ->
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(command[:4])} ... on {state} failed:\n{done.stderr[-3000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def per_process(processes: list[dict]) -> dict[str, list[float]]:
+    """Each quantity, one value per process: the median over the timed steps (the peak memory)."""
+    keys = [k for k in processes[0]["rows"][0] if k not in ("cells",)]
+    out = {k: [median(r[k] for r in p["rows"]) for p in processes] for k in keys}
+    out["memory"] = [p["memory"] for p in processes]
+    out["other"] = [c - f for c, f in zip(out["cpu"], out["factor"], strict=True)]  # NaN for ipm
+    return out
 
 
 def apart(one: Path, two: Path) -> tuple[bool, float]:
@@ -148,83 +164,101 @@ def alike(cells: int, scratch: Path) -> list[str]:
     return lines
 
 
-CONFIGURATIONS = (("one process, ipm", "ipm", 1), ("1 MPI process, ipm-petsc", "ipm-petsc", 1),
-                  ("2 MPI processes, ipm-petsc", "ipm-petsc", 2),
-                  ("2 MPI processes, ipm-petsc, detection in each", "repeated", 2))
+HEADER = ("| state | cells | run on | step, wall [s] | CPU s per process, largest | CPU s summed | CPU s other than "
+          "factorization, largest (ratio to 1 MPI process) | factorization CPU s, largest | detection, assembly, solve "
+          "CPU s, largest | MUMPS Gflop per process, largest (summed) | factor entries per process, largest [10⁶] | "
+          "MB sent per process, largest | peak memory per process, largest [MiB] | linearizations | largest overlap |",
+          "|---|---:|---|---:|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|---:|")
+
+
+def row(name: str, label: str, values: dict[str, list[float]], cells: int, reference: float) -> str:
+    """One line of the per-process table."""
+    big = lambda k: max(values[k])  # noqa: E731
+    other = big("other")
+    ratio = f" ({other / reference:.2f})" if reference == reference and other == other else ""
+    flops = f"{big('flops') / 1e9:.1f} ({sum(values['flops']) / 1e9:.1f})" if big("flops") == big("flops") else "–"
+    entries = f"{big('entries') / 1e6:.2f}" if big("entries") == big("entries") else "–"
+    return (f"| {name} | {cells:,} | {label} | {big('total'):.2f} | {big('cpu'):.2f} | {sum(values['cpu']):.2f} | "
+            f"{other:.2f}{ratio} | {big('factor'):.2f} | {big('detect'):.2f}, {big('assemble'):.2f}, "
+            f"{big('solve'):.2f} | {flops} | {entries} | {big('sent') / 1e6:.2f} | {big('memory'):.0f} | "
+            f"{median(values['linearizations']):g} | {max(values['max_overlap']):.4f} |")
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--states", type=Path, required=True, help="folder of grown colonies (bench-grown's cache)")
-    parser.add_argument("--steps", type=int, default=3, help="steps timed per measurement, median kept (default: 3)")
+    parser.add_argument("--steps", type=int, default=2, help="steps timed per measurement, median kept (default: 2)")
+    parser.add_argument("--processes", default="1,2,4,8",
+                        help="the numbers of MPI processes, comma-separated (default: 1,2,4,8; oversubscribed "
+                             "where the machine has fewer cores)")
+    parser.add_argument("--names", default="2d-20000,3d-5000",
+                        help="the states of --states measured, comma-separated (default: 2d-20000,3d-5000)")
     parser.add_argument("--grow", type=int, default=0,
                         help="also grow a 2D colony from one cell to this many cells in one process and on two, "
                              "and compare the runs (default: 0, not run)")
-    parser.add_argument("--out", type=Path, default=Path("mpi-scaling.md"),
-                        help="the Markdown table written (default: ./mpi-scaling.md)")
+    parser.add_argument("--folder", type=Path, default=Path("mpi-scaling"),
+                        help="where the table (mpi-scaling.md) and every process's numbers (mpi-scaling.json) are "
+                             "written (default: ./mpi-scaling)")
     args = parser.parse_args(argv)
     if args.steps < 1:
         parser.error("--steps: expected an integer >= 1")
     if not args.states.is_dir():
         parser.error(f"--states: no such folder: {args.states}")
+    try:
+        counts = [int(p) for p in args.processes.split(",")]
+    except ValueError:
+        parser.error(f"--processes: expected integers separated by commas, got {args.processes!r}")
+    if any(p < 1 for p in counts):
+        parser.error(f"--processes: expected integers >= 1, got {args.processes!r}")
+    args.folder.mkdir(parents=True, exist_ok=True)
     started, measured_on = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"), machine()
     scratch = Path(tempfile.mkdtemp(prefix="mpi-scaling-"))
-    lines = [f"# One colony over MPI processes\n\n{started}, qpcontact {version()}, {measured_on} at the start; median of {args.steps} "
-             "steps per line, each from the last, after one untimed step; memory: each process's peak resident "
-             "set.\n",
-             "| state | cells | run on | step [s] | detection [s] | assembly [s] | contact solve [s] | speed-up (to one "
-             "process) | speed-up (to 1 MPI process) | IPM iterations | largest overlap | peak memory per process [MiB] |",
-             "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
-    steps: dict[tuple[str, str], float] = {}
-    for name in ("2d-20000", "3d-5000", "2d-10000"):
+    lines = [f"# One colony over MPI processes, per process\n\n{started}, qpcontact {version()}, {measured_on} at the "
+             f"start; {os.cpu_count()} cores (more processes are oversubscribed); median of {args.steps} steps per "
+             "process, each from the last, after one untimed step. CPU seconds: time.process_time of each process "
+             "(a process waiting in a collective polls, and that counts); factorization: MUMPS's analysis and "
+             "numeric factorizations; MUMPS Gflop: RINFO(3), elimination on that process; factor entries: INFO(9); "
+             "MB sent: what qpcontact's collectives send plus the halo of the products with B̃ and the gathered "
+             "answer (MUMPS's own messages not counted); memory: peak resident set (ru_maxrss).\n", *HEADER]
+    raw: dict[str, dict] = {}
+    for name in args.names.split(","):
         state = args.states / f"{name}.npz"
         if not state.is_file():
             print(f"{state}: missing, left out", file=sys.stderr)
             continue
-        for label, solver, processes in CONFIGURATIONS:
-            if name == "2d-10000" and processes == 2:
-                continue  # the weak scaling's one-process half
+        reference = float("nan")
+        for label, solver, processes in [("one process, ipm", "ipm", 1),
+                                         *((f"{p} MPI process{'es' if p > 1 else ''}, ipm-petsc", "ipm-petsc", p)
+                                           for p in counts)]:
             t = time.perf_counter()
             result = measure(state, args.steps, solver, processes, scratch / f"{name}-{solver}-{processes}.npz")
-            rows = result["rows"]
-            step, solve = median(r["total"] for r in rows), median(r["solve"] for r in rows)
-            steps[(name, label)] = step
-            first = steps.get((name, CONFIGURATIONS[0][0]), float("nan"))
-            petsc_one = steps.get((name, CONFIGURATIONS[1][0]), float("nan"))
-            detect, assemble = median(r["detect"] for r in rows), median(r["assemble"] for r in rows)
-            lines.append(f"| {name} | {rows[0]['cells']:,} | {label} | {step:.2f} | {detect:.2f} | {assemble:.2f} | "
-                         f"{solve:.2f} | {first / step:.2f} | "
-                         f"{petsc_one / step:.2f} | {median(r['solver_iterations'] for r in rows):g} | "
-                         f"{max(r['max_overlap'] for r in rows):.4f} | "
-                         + ", ".join(f"{m:.0f}" for m in result["memory"]) + " |")
-            print(f"{name}, {label}: {time.perf_counter() - t:.0f} s", file=sys.stderr)
-    weak = [(f"{n} on {label}", steps[(n, label)]) for n, label in
-            (("2d-10000", CONFIGURATIONS[0][0]), ("2d-10000", CONFIGURATIONS[1][0]), ("2d-20000", CONFIGURATIONS[2][0]))
-            if (n, label) in steps]
-    if len(weak) == 3:
-        lines.append(f"\nWeak scaling (2D, N = 10⁴ on one process, 2N on two): {weak[2][1]:.2f} s against "
-                     f"{weak[0][1]:.2f} s (ipm) and {weak[1][1]:.2f} s (ipm-petsc on one): "
-                     f"{weak[2][1] / weak[0][1]:.2f}× and {weak[2][1] / weak[1][1]:.2f}× the time per step.")
+            values = per_process(result)
+            values["cells"] = [float(result[0]["rows"][0]["cells"])]
+            if solver == "ipm-petsc" and processes == 1:
+                reference = values["other"][0]
+            raw[f"{name}, {label}"] = values
+            lines.append(row(name, label, values, int(result[0]["rows"][0]["cells"]), reference))
+            print(lines[-1], f"({time.perf_counter() - t:.0f} s)", file=sys.stderr)
     agreement = []
-    for name in ("2d-3000", "3d-1000"):
+    for name in args.names.split(","):
         state = args.states / f"{name}.npz"
-        if not state.is_file():
-            print(f"{state}: missing, left out", file=sys.stderr)
-            continue
-        one, two = scratch / f"{name}-one.npz", scratch / f"{name}-two.npz"
-        measure(state, args.steps, "ipm", 1, one)
-        measure(state, args.steps, "ipm-petsc", 2, two)
-        same, distance = apart(one, two)
-        agreement.append(f"| {name} | {args.steps + 1} | {'yes' if same else 'NO'} | {distance:.2e} |")
+        one = scratch / f"{name}-ipm-1.npz"
+        for processes in (p for p in counts if p > 1):
+            other = scratch / f"{name}-ipm-petsc-{processes}.npz"
+            if state.is_file() and one.is_file() and other.is_file():
+                same, distance = apart(one, other)
+                agreement.append(f"| {name} | {processes} | {args.steps + 1} | {'yes' if same else 'NO'} | {distance:.2e} |")
     if agreement:
-        lines += ["\nAgreement, from the same state, steps on 2 MPI processes (ipm-petsc) against one process (ipm):\n",
-                  "| state | steps | same cells and ids | largest tip distance [diameters] |", "|---|---:|---|---:|",
-                  *agreement]
+        lines += ["\nAgreement, from the same state, the steps above on P MPI processes (ipm-petsc) against one "
+                  "process (ipm):\n", "| state | P | steps | same cells and ids | largest tip distance [diameters] |",
+                  "|---|---:|---:|---|---:|", *agreement]
     if args.grow:
         lines += ["", *alike(args.grow, scratch)]
     text = "\n".join(lines) + "\n"
     print(text)
-    args.out.write_text(text)
+    (args.folder / "mpi-scaling.md").write_text(text)
+    (args.folder / "mpi-scaling.json").write_text(json.dumps(dict(date=started, machine=measured_on, per_process=raw),
+                                                             indent=1))
 
 
 if __name__ == "__main__":

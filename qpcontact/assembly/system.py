@@ -32,6 +32,7 @@ import scipy.sparse as sp
 from ..errors import InvalidArgumentError
 from ..geometry.cells import PLANAR_TOLERANCE, Cells, perpendicular_basis
 from ..geometry.contacts import Contacts
+from ..geometry.regions import ONE, Split
 
 #: Slots of a cell, in order. Their world-frame directions come from :func:`slot_directions`.
 SLOTS = ("tx", "ty", "tz", "spin", "roll1", "roll2", "growth")
@@ -91,6 +92,11 @@ class ContactSystem:
         n_cells: number of cells in the scene.
         planar: whether the planar reduction was used.
         contacts: the K colliding contacts, in row order.
+        owned_rows: the rows this process assembled, when the system is shared among the
+            processes of ``split`` (:func:`build_system`'s ``split``): the other rows of
+            ``matrix`` are empty and those of ``rhs`` and ``b`` are not meaningful; None: every
+            row is here.
+        split: the processes the system is shared among (:class:`~qpcontact.geometry.regions.Split`).
     """
 
     matrix: sp.csr_matrix
@@ -105,6 +111,8 @@ class ContactSystem:
     n_cells: int
     planar: bool
     contacts: Contacts
+    owned_rows: np.ndarray | None = None
+    split: Split = ONE
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -144,7 +152,7 @@ class ContactSystem:
         b = np.asarray(b, dtype=float)
         if b.shape != self.b.shape:
             raise InvalidArgumentError(f"b: expected shape {self.b.shape}, got {b.shape}")
-        scale = _velocity_scale(b)
+        scale = _velocity_scale(b, self.owned_rows, self.split)
         return dataclasses.replace(self, rhs=b / scale, b=b, velocity_scale=scale)
 
     def from_impulses(self, impulses: np.ndarray) -> np.ndarray:
@@ -200,14 +208,19 @@ def velocity_changes(cells: Cells, contacts: Contacts, impulses: np.ndarray, tur
     return build_system(cells, contacts, np.ones(len(contacts)), planar=False, turned=turned).velocity_changes(impulses)
 
 
-def _velocity_scale(b: np.ndarray) -> float:
-    """``σ_b`` [length/time]: the fastest approach, ``max b`` (``max|b|`` if none approaches)."""
-    return float(np.max(b)) if np.max(b) > 0 else float(np.max(np.abs(b)))
+def _velocity_scale(b: np.ndarray, rows: np.ndarray | None = None, split: Split = ONE) -> float:
+    """``σ_b`` [length/time]: the fastest approach, ``max b`` (``max|b|`` if none approaches);
+    over the ``rows`` each process of ``split`` holds when the system is shared."""
+    if rows is None:
+        return float(np.max(b)) if np.max(b) > 0 else float(np.max(np.abs(b)))
+    own = b[rows]
+    fastest = split.most(float(np.max(own, initial=-np.inf)))
+    return fastest if fastest > 0 else split.most(float(np.max(np.abs(own), initial=0.0)))
 
 
 def build_system(
     cells: Cells, contacts: Contacts, b: np.ndarray, *, reduce: bool = True, planar: bool | None = None,
-    scale: bool = True, turned: Turned | None = None,
+    scale: bool = True, turned: Turned | None = None, split: Split = ONE, owner: np.ndarray | None = None,
 ) -> ContactSystem:
     """Assemble the scaled system for the colliding ``contacts`` with right-hand side ``b``.
 
@@ -223,6 +236,14 @@ def build_system(
             then ``J W^{1/2}`` in the caller's units), only to measure the effect of scaling.
         turned: the contacts are those at the end of a step that turned the cells
             (:class:`Turned`; the position-level step); None: at the cells as they are.
+        split, owner: the processes sharing the assembly and the (N,) process that owns each
+            cell: each process builds the rows of the contacts whose first cell is its own (the
+            scales are reductions over the processes); the columns are numbered alike in every
+            process. None (or one process): every row.
+
+    Raises:
+        InvalidArgumentError: a bad ``b`` or ``planar``, no contact, or a contact whose cells
+            cannot move.
     """
     k = len(contacts)
     if b.shape != (k,):
@@ -236,20 +257,25 @@ def build_system(
         raise InvalidArgumentError("planar=True, but some contact normal or axis leaves the xy-plane")
     planar = bool(planar and reduce)
 
+    rows = None if owner is None or split.size == 1 else np.flatnonzero(owner[contacts.cell_a] == split.rank)
     column_of = _columns(cells, contacts, reduce, planar)
     inverse_mass = slot_inverse_mass(cells, np.arange(cells.n))
-    raw = _raw_matrix(cells, contacts, column_of, np.sqrt(inverse_mass), turned)
+    raw = _raw_matrix(cells, contacts, column_of, np.sqrt(inverse_mass), turned, rows)
     diag = np.asarray(raw.multiply(raw).sum(axis=1)).ravel()
-    if not np.all(diag > 0):
-        bad = int(np.flatnonzero(~(diag > 0))[0])
-        raise InvalidArgumentError(
-            f"contact {bad} (cells {contacts.cell_a[bad]}, {contacts.cell_b[bad]}) has no movable degree of freedom"
-        )
+    held = slice(None) if rows is None else rows
+    stuck = np.flatnonzero(~(diag[held] > 0))
+    if split.most(float(stuck.size)) > 0:  # every process raises, not only the one that holds the row
+        if stuck.size:
+            bad = int(np.arange(k)[held][stuck[0]])
+            raise InvalidArgumentError(
+                f"contact {bad} (cells {contacts.cell_a[bad]}, {contacts.cell_b[bad]}) has no movable degree of freedom")
+        raise InvalidArgumentError("a contact held by another process has no movable degree of freedom")
     # scale=False (σ_b = σ_B = 1) exists to measure what the scaling buys (docs/stability.md).
-    operator_scale = float(np.sqrt(diag.mean())) if scale else 1.0
+    mean = float(diag.mean()) if rows is None else split.total(float(diag.sum())) / k
+    operator_scale = float(np.sqrt(mean)) if scale else 1.0
     # The approach speeds set the scale: separating contacts kept in the system (b <= 0) must
     # not shrink the colliding ones' right-hand sides towards the solvers' tolerances.
-    velocity_scale = _velocity_scale(b) if scale else 1.0
+    velocity_scale = _velocity_scale(b, rows, split) if scale else 1.0
     # Columns were numbered in row-major order of column_of (involved is sorted), so np.nonzero
     # lists them in column order.
     col_cell, col_slot = np.nonzero(column_of >= 0)
@@ -267,6 +293,8 @@ def build_system(
         n_cells=cells.n,
         planar=planar,
         contacts=contacts,
+        owned_rows=rows,
+        split=split,
     )
 
 
@@ -297,9 +325,14 @@ def _columns(cells: Cells, contacts: Contacts, reduce: bool, planar: bool) -> np
 
 
 def _raw_matrix(cells: Cells, contacts: Contacts, column_of: np.ndarray, sqrt_w: np.ndarray,
-                turned: Turned | None) -> sp.csr_matrix:
-    """(K, columns) ``J W^{1/2}``, unscaled: each contact's Jacobian rows of its two sides."""
+                turned: Turned | None, held: np.ndarray | None = None) -> sp.csr_matrix:
+    """(K, columns) ``J W^{1/2}``, unscaled: each contact's Jacobian rows of its two sides; only
+    the rows ``held`` when given (the others empty)."""
     rows, cols, vals = [], [], []
+    everything = len(contacts)
+    index = np.arange(everything) if held is None else held
+    if held is not None:
+        contacts = contacts.subset(held)
     for cell, sign, side in [(contacts.cell_a, 1.0, "a"), (contacts.cell_b, -1.0, "b")]:
         valid = cell >= 0
         jac = contact_jacobian(contacts if valid.all() else contacts.subset(valid), cells, side, turned) * sign
@@ -307,8 +340,8 @@ def _raw_matrix(cells: Cells, contacts: Contacts, column_of: np.ndarray, sqrt_w:
         col = column_of[c]
         entry = jac * sqrt_w[c]
         keep = col >= 0
-        rows.append(np.broadcast_to(np.flatnonzero(valid)[:, None], col.shape)[keep])
+        rows.append(np.broadcast_to(index[valid][:, None], col.shape)[keep])
         cols.append(col[keep])
         vals.append(entry[keep])
     rows_a, cols_a, vals_a = (np.concatenate(x) for x in (rows, cols, vals))
-    return sp.csr_matrix((vals_a, (rows_a, cols_a)), shape=(len(contacts), int((column_of >= 0).sum())))
+    return sp.csr_matrix((vals_a, (rows_a, cols_a)), shape=(everything, int((column_of >= 0).sum())))

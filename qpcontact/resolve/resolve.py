@@ -147,6 +147,8 @@ def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, l
     and bound complementarity) in place of the duality gap and the multiplier consistency, which
     assume no bounds."""
     limit = acceptance_limit(tolerance)
+    if system.owned_rows is not None:
+        return _shared_acceptance(system, formulation, y, lam, limit, lower, upper)
     checks = {"penetrates by": metrics.penetration(system, y)}
     bounded = lower is not None or upper is not None
     if formulation == "complementarity" and lam is None:
@@ -189,6 +191,40 @@ def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, l
             if formulation == "linear" and what == "penetrates by":
                 return (f"the answer {what} {value:.3g} (> {limit:.3g}): Mx = b has no solution (more contacts "
                         "than the cells can satisfy, e.g. with position correction); use a QP formulation")
+            return f"the answer {what} {value:.3g} (> {limit:.3g} = min({ACCEPT_FACTOR:g}·tolerance, {ACCEPT_CAP:g}))"
+    return ""
+
+
+def _shared_acceptance(system: ContactSystem, formulation: str, y: np.ndarray, lam: np.ndarray | None, limit: float,
+                       lower: np.ndarray | None, upper: np.ndarray | None) -> str:
+    """:func:`acceptance_failure` of a system shared among processes, each holding its own rows
+    (the position step's, :func:`~qpcontact.assembly.system.build_system` with ``split``): the
+    measures of rows are reduced over the processes, ``B̃ᵀλ̃`` is summed; every process gets the
+    same verdict. The complementarity formulation with bounds only (the position step's)."""
+    split, rows = system.split, system.owned_rows
+    assert rows is not None
+    if formulation != "complementarity" or lam is None:
+        return f"a system shared among processes is checked in the complementarity formulation, with impulses; got {formulation}"
+    slack = (system.matrix @ y)[rows] - system.rhs[rows]
+    largest_rhs = split.most(float(np.max(np.abs(system.rhs[rows]), initial=0.0)))
+    scale = max(float(np.abs(lam).max(initial=0.0)), 1.0)
+    residual = y - split.summed(system.matrix.T @ lam)
+    checks = {"penetrates by": split.most(max(0.0, -float(slack.min(initial=0.0)))) / largest_rhs,
+              "has complementarity residual": split.most(float(np.max(np.abs(lam[rows] * slack), initial=0.0))) / scale,
+              "pulls with relative contact impulse": max(0.0, -float(lam.min(initial=0.0))) / scale}
+    lo = np.full(y.size, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+    hi = np.full(y.size, np.inf) if upper is None else np.asarray(upper, dtype=float)
+    alpha = np.where(np.isfinite(lo), np.maximum(residual, 0.0), 0.0)
+    beta = np.where(np.isfinite(hi), np.maximum(-residual, 0.0), 0.0)
+    residual = residual - alpha + beta
+    with np.errstate(invalid="ignore"):
+        checks["violates a bound by"] = max(0.0, float(np.max(np.maximum(lo - y, y - hi), initial=0.0)))
+        gaps = np.concatenate([np.where(alpha > 0, alpha * (y - lo), 0.0), np.where(beta > 0, beta * (hi - y), 0.0)])
+    checks["has bound complementarity residual"] = float(np.max(np.abs(gaps), initial=0.0)) / scale
+    checks["has stationarity residual (bounds included)"] = float(np.linalg.norm(residual)) / max(
+        float(np.linalg.norm(y)), 1.0)
+    for what, value in checks.items():
+        if not value <= limit:
             return f"the answer {what} {value:.3g} (> {limit:.3g} = min({ACCEPT_FACTOR:g}·tolerance, {ACCEPT_CAP:g}))"
     return ""
 

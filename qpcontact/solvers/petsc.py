@@ -1,10 +1,11 @@
 """ipm-petsc: the interior point of :mod:`.ipm` over MPI processes, on PETSc's distributed objects.
 
-Under ``mpiexec -n P``, every process holds the same problem (the colony's state and its contact
-system are replicated, docs/distributed.md); this solver splits it: the cells (the groups of
-columns of ``B̃`` with the same rows, :func:`~qpcontact.solvers.cholesky.column_groups`) are
-partitioned by METIS into P connected regions of the contact graph, each process owns the unknowns
-of its cells and the contact rows whose first cell is its own, and the iterations of
+Under ``mpiexec -n P``, every process holds the same problem (the colony's state is replicated,
+docs/distributed.md; in the position step each process assembles only its own rows of it); this
+solver splits it: each process owns the unknowns of some cells and some contact rows (the position
+step's slabs, given as ``owners``; or, in a direct call, the cells, the groups of columns of ``B̃``
+with the same rows, :func:`~qpcontact.solvers.cholesky.column_groups`, partitioned by METIS into P
+connected regions of the contact graph, each row with its first cell), and the iterations of
 :func:`qpcontact.solvers.ipm.iterate_rows` run on those parts:
 
 - the products with ``B̃`` and ``B̃ᵀ`` are PETSc's (an MPIAIJ matrix; the halo of unknowns that
@@ -74,6 +75,25 @@ def world() -> Any:
     return petsc().COMM_WORLD.tompi4py()
 
 
+#: What this process's distributed solves did since the counters were last reset
+#: (:func:`reset_counters`): CPU seconds of the factorizations (MUMPS's analysis and numeric
+#: factorization, ``time.process_time``), MUMPS's floating-point operations of elimination on this
+#: process (RINFO(3), summed), the entries of its last factor on this process (INFO(9)), its largest
+#: working memory on this process [MB] (INFO(16)), the products with ``B̃`` and the bytes of unknowns
+#: this process sent to its neighbours for them (the halo of PETSc's scatter, counted from the
+#: columns its rows read from other processes: each product sends as many as it receives, on average).
+COUNTERS: dict[str, float] = {}
+
+
+def reset_counters() -> None:
+    """Set :data:`COUNTERS` to zero."""
+    COUNTERS.update(factor_cpu=0.0, factor_flops=0.0, factor_entries=0.0, factor_memory_mb=0.0, products=0.0,
+                    halo_bytes=0.0, gathered_bytes=0.0)
+
+
+reset_counters()
+
+
 class _Reductions(Reductions):
     """Reductions over the processes of ``comm``: to process 0, then broadcast (an all-reduce
     may give processes results that differ in the last bit, and their branches would part)."""
@@ -100,9 +120,12 @@ class Partition:
     """Which process owns which columns (unknowns) and rows (contacts) of a (K, n) ``B̃``, and the
     order that puts each process's part in one block (PETSc's distributed objects own ranges).
 
-    Columns go by cells (:func:`~qpcontact.solvers.cholesky.column_groups`), cells by METIS's
-    k-way partition of the cells' contact graph (computed by process 0, broadcast); a row goes
-    with the owner of its first column.
+    Given ``column_owner`` and ``row_owner`` (the position step's: the slabs of
+    :func:`~qpcontact.geometry.regions.slab_owners`, computed alike by every process), those.
+    Otherwise columns go by cells (:func:`~qpcontact.solvers.cholesky.column_groups`), cells by
+    METIS's k-way partition of the cells' contact graph (computed by process 0, broadcast: a
+    direct call of :func:`distributed_interior_point`), and a row goes with the owner of its
+    first column.
 
     Attributes:
         column_order: (n,) the columns in the order of the processes' blocks.
@@ -110,14 +133,22 @@ class Partition:
         column_counts, row_counts: (P,) the size of each process's block.
     """
 
-    def __init__(self, matrix: sp.csr_matrix, comm: Any) -> None:
+    def __init__(self, matrix: sp.csr_matrix, comm: Any, column_owner: np.ndarray | None = None,
+                 row_owner: np.ndarray | None = None) -> None:
         size = comm.Get_size()
         k, n = matrix.shape
-        owner = np.zeros(n, dtype=np.int64)
-        if size > 1:
-            owner = comm.bcast(_owners(matrix, size) if comm.Get_rank() == 0 else None, root=0)
-        first = matrix.indices[matrix.indptr[:-1]] if k else np.zeros(0, dtype=np.int64)
-        row_owner = owner[first]
+        if column_owner is not None and row_owner is not None:
+            owner, row_owner = np.asarray(column_owner, dtype=np.int64), np.asarray(row_owner, dtype=np.int64)
+            if owner.shape != (n,) or row_owner.shape != (k,) or np.any((owner < 0) | (owner >= size)) \
+                    or np.any((row_owner < 0) | (row_owner >= size)):
+                raise InvalidArgumentError(f"owners: expected ({n},) and ({k},) process numbers below {size}, got "
+                                           f"shapes {owner.shape} and {row_owner.shape}")
+        else:
+            owner = np.zeros(n, dtype=np.int64)
+            if size > 1:
+                owner = comm.bcast(_owners(matrix, size) if comm.Get_rank() == 0 else None, root=0)
+            first = matrix.indices[matrix.indptr[:-1]] if k else np.zeros(0, dtype=np.int64)
+            row_owner = owner[first]
         self.column_order = np.argsort(owner, kind="stable")
         self.row_order = np.argsort(row_owner, kind="stable")
         self.column_counts = np.bincount(owner, minlength=size)
@@ -152,16 +183,22 @@ class _Operator:
     """``B̃`` (or ``B̃ᵀ``) on the parts of vectors a process owns: ``@`` as :class:`~.ipm._Rows`
     uses it, by PETSc's distributed product (which brings the halo of unknowns)."""
 
-    def __init__(self, matrix: Any, transpose: bool) -> None:
-        self.matrix, self.transpose = matrix, transpose
+    def __init__(self, matrix: Any, transpose: bool, halo: int = 0) -> None:
+        self.matrix, self.transpose, self.halo = matrix, transpose, halo
         right, left = matrix.createVecs()
         self._in, self._out = (left, right) if transpose else (right, left)
         self.shape = (self._out.getLocalSize(), self._in.getLocalSize())
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        COUNTERS["products"] += 1
+        COUNTERS["halo_bytes"] += 8 * self.halo
         self._in.array[:] = x
         (self.matrix.multTranspose if self.transpose else self.matrix.mult)(self._in, self._out)
         return self._out.array.copy()
+
+
+#: MUMPS's ICNTL(14) unless the user sets it (PETSc's option ``-mat_mumps_icntl_14``).
+WORKSPACE_PERCENT = 60
 
 
 class DistributedGram:
@@ -180,6 +217,11 @@ class DistributedGram:
         pc = self._ksp.getPC()
         pc.setType(PETSc.PC.Type.CHOLESKY)
         pc.setFactorSolverType(PETSc.Mat.SolverType.MUMPS)
+        options = PETSc.Options()
+        if not options.hasName("mat_mumps_icntl_14"):
+            # MUMPS's workspace beyond its estimate, in percent (its default 20 ran short,
+            # INFOG(1) = -9, on 4 processes owning slabs of a 400-cell colony, 2026-12-05).
+            options.setValue("mat_mumps_icntl_14", WORKSPACE_PERCENT)
         self._x, self._b = self._diagonal.duplicate(), self._diagonal.duplicate()
 
     def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
@@ -201,8 +243,16 @@ class DistributedGram:
         if first:  # MUMPS's Cholesky without pivoting (its symmetric positive definite mode)
             self._normal.setOption(PETSc.Mat.Option.SPD, True)
         self._ksp.setOperators(self._normal)
+        cpu = time.process_time()
         self._ksp.setUp()
-        status = self._ksp.getPC().getFactorMatrix().getMumpsInfog(1)  # the same on every process
+        COUNTERS["factor_cpu"] += time.process_time() - cpu
+        factor = self._ksp.getPC().getFactorMatrix()
+        status = factor.getMumpsInfog(1)  # the same on every process
+        if status >= 0:
+            COUNTERS["factor_flops"] += float(factor.getMumpsRinfo(3))
+            entries = float(factor.getMumpsInfo(9))  # negative: millions
+            COUNTERS["factor_entries"] = entries if entries >= 0 else -1e6 * entries
+            COUNTERS["factor_memory_mb"] = max(COUNTERS["factor_memory_mb"], float(factor.getMumpsInfo(16)))
         if status == -10:  # numerically singular: the interior point regularizes more
             raise ArithmeticError("MUMPS: the matrix is numerically singular (INFOG(1) = -10)")
         if status < 0:
@@ -237,10 +287,13 @@ def _gather(part: np.ndarray, order: np.ndarray, counts: np.ndarray, comm: Any) 
 def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None = None,
                                upper: np.ndarray | None = None, *, tolerance: float = 1e-4,
                                max_iterations: int | None = None, time_limit: float | None = None,
-                               comm: Any = None) -> IterativeSolution:
+                               comm: Any = None, owners: tuple[np.ndarray, np.ndarray] | None = None
+                               ) -> IterativeSolution:
     """:func:`qpcontact.solvers.ipm.interior_point` over the processes of ``comm`` (default
     :func:`world`): every process passes the same problem and gets the same answer (module
-    docstring).
+    docstring). ``owners``: ``(column_owner, row_owner)``, the process of each unknown and each
+    row (:class:`Partition`); then a process reads only its own rows of ``matrix`` and
+    ``rhs`` (the others may be left empty: the position step assembles only its own).
 
     Raises:
         InvalidArgumentError: a tolerance below :data:`~qpcontact.solvers.ipm.UNKNOWNS_ACCURACY`
@@ -257,13 +310,13 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
         B = B.sorted_indices()  # a copy: the caller's matrix stays as it was
     k, n = B.shape
     lo, hi = bounds_of(lower, upper, n)
-    partition = Partition(B, comm)
+    partition = Partition(B, comm, *(owners or (None, None)))
     mine, my_rows = partition.columns(comm.Get_rank()), partition.rows(comm.Get_rank())
-    mat = _distributed_matrix(B, partition, my_rows, comm)
+    mat, halo = _distributed_matrix(B, partition, my_rows, comm)
     reduce = _Reductions(comm)
     normal = DistributedGram(mat)
     try:
-        rows = make_rows(_Operator(mat, False), _Operator(mat, True), np.asarray(rhs, dtype=float)[my_rows],
+        rows = make_rows(_Operator(mat, False, halo), _Operator(mat, True, halo), np.asarray(rhs, dtype=float)[my_rows],
                          lo[mine], hi[mine], reduce)
         if rows is None:
             return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf,
@@ -278,13 +331,16 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
     assert part.lam is not None
     y = _gather(part.y, partition.column_order, partition.column_counts, comm)
     lam = _gather(part.lam, partition.row_order, partition.row_counts, comm)
+    if comm.Get_size() > 1:
+        COUNTERS["gathered_bytes"] += 8.0 * (part.y.size + part.lam.size)
     return IterativeSolution(y, lam, part.iterations, part.converged, part.status, part.residual,
                              time.perf_counter() - start)
 
 
-def _distributed_matrix(B: sp.csr_matrix, partition: Partition, rows: np.ndarray, comm: Any) -> Any:
+def _distributed_matrix(B: sp.csr_matrix, partition: Partition, rows: np.ndarray, comm: Any) -> tuple[Any, int]:
     """``B̃`` as PETSc's MPIAIJ matrix: this process's ``rows``, the columns renumbered in the
-    order of the processes' blocks (collective)."""
+    order of the processes' blocks (collective); and how many columns of other processes its rows
+    read (the halo of a product)."""
     PETSc = petsc()
     k, n = B.shape
     place = np.empty(n, dtype=np.int64)
@@ -293,11 +349,14 @@ def _distributed_matrix(B: sp.csr_matrix, partition: Partition, rows: np.ndarray
     local = sp.csr_matrix((local.data, place[local.indices], local.indptr), shape=local.shape)
     local.sort_indices()
     owned = int(partition.column_counts[comm.Get_rank()])
+    first = int(partition.column_counts[:comm.Get_rank()].sum())
+    read = np.unique(local.indices)
+    halo = int(np.count_nonzero((read < first) | (read >= first + owned)))
     mat = PETSc.Mat().createAIJ(size=((rows.size, k), (owned, n)),
                                 csr=(local.indptr.astype(PETSc.IntType), local.indices.astype(PETSc.IntType),
                                      local.data), comm=_petsc_comm(comm))
     mat.assemble()
-    return mat
+    return mat, halo
 
 
 def _petsc_comm(comm: Any) -> Any:
@@ -309,7 +368,7 @@ def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, t
            settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
     out = distributed_interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
                                      time_limit=time_limit, max_iterations=settings.get("max_iterations"),
-                                     comm=settings.get("comm"))
+                                     comm=settings.get("comm"), owners=settings.get("owners"))
     return out.output()
 
 
@@ -317,6 +376,6 @@ register(SolverSpec(
     "ipm-petsc", formulations=("complementarity",), forms=("contact",), warm_start=False, time_limit=True,
     solve=_solve, available=installed,
     description="the built-in interior point over MPI processes (PETSc, MUMPS); takes bounds on ỹ",
-    settings=("max_iterations", "comm"), blockwise=False, bounds=("contact",),
+    settings=("max_iterations", "comm", "owners"), blockwise=False, bounds=("contact",),
     install_hint=f"{INSTALL_HINT}; a run saved by several processes continues in one with --position-solver ipm",
 ))

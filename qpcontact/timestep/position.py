@@ -179,7 +179,7 @@ def _bounds(system: ContactSystem, cells: Cells, drive: np.ndarray, impulses: np
 
 def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray, aim: np.ndarray,
                dt: float, drive: np.ndarray, impulses: np.ndarray, planar: bool, settings: PositionSettings,
-               radius: np.ndarray | None) -> tuple[ContactSystem, Problem, np.ndarray] | None:
+               radius: np.ndarray | None, split: Split) -> tuple[ContactSystem, Problem, np.ndarray] | None:
     """The QP of one linearization (module docstring) and its turning caps (:func:`_bounds`), or
     None when no contact asks for a push.
 
@@ -188,7 +188,10 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
     derivative of the contact's separation at the moved positions: rotations enter through the
     left Jacobian of each cell's turn (:class:`qpcontact.assembly.system.Turned`), so in 3D the
     linearization is exact to first order (turning about the moved axes instead, as this step did
-    until 2026-12, made the linearizations converge only linearly: 3–6 per step)."""
+    until 2026-12, made the linearizations converge only linearly: 3–6 per step).
+
+    Over several processes (``split``), each assembles the rows of the contacts whose first cell
+    it owns (:func:`~qpcontact.assembly.system.build_system`); the rest is the same in every one."""
     turned = Turned(axes=now.axes, jacobian=left_jacobian(turning_vectors(cells, dt, drive + impulses)))
     # The rows first (the right-hand side needs their product with the impulses so far), then
     # d_k + dt·(J W (x_new − x))_k ≥ target_k + aim_k  ⇔  (J W x_new)_k ≥ (target_k + aim_k − d_k)/dt + (J W x)_k
@@ -196,11 +199,13 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
     if not np.any(impulses):  # the first linearization: nothing to add
         if not np.any(b > 0):
             return None
-        system = build_system(cells, contacts, b, planar=planar, turned=turned)
+        system = build_system(cells, contacts, b, planar=planar, turned=turned, split=split, owner=split.owner)
     else:
-        system = build_system(cells, contacts, np.ones(len(contacts)), planar=planar, turned=turned)
-        b = b + system.velocity_changes(impulses)
-        if not np.any(b > 0):
+        system = build_system(cells, contacts, np.ones(len(contacts)), planar=planar, turned=turned, split=split,
+                              owner=split.owner)
+        b = b + system.velocity_changes(impulses)  # right only in the rows this process holds
+        held = b if system.owned_rows is None else b[system.owned_rows]
+        if not split.most(float(np.any(held > 0))):
             return None
         system = system.with_rhs(b)
     if not settings.bounded:
@@ -358,10 +363,16 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np
     key_a, key_b = progress.found.keyed(ids)
     initial = system.from_contact_impulses(progress.last.lookup(key_a, key_b, progress.found.kind)) \
         if spec.warm_start else None
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
+    options = None if comm is None else {"comm": comm}
+    if options is not None and system.owned_rows is not None:
+        owner = system.split.owner
+        assert owner is not None
+        options["owners"] = (owner[system.column_cell], owner[system.contacts.cell_a])
     out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial,
-                settings=None if comm is None else {"comm": comm})
+                settings=options)
     times["solve"] += time.perf_counter() - t0
+    times["solve_cpu"] += time.process_time() - c0
     progress.solver_iterations += out.iterations or 0
     refused = "" if out.y is None or not out.found else acceptance_failure(
         system, "complementarity", out.y, out.lam, settings.tolerance, problem.lower, problem.upper)
@@ -470,10 +481,11 @@ def position_step(
         converged, message = _verdict(progress, excess, iteration, settings)
         if converged or message:
             break
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         linear = _linearize(cells, now, contacts, target, settings.aim * diameter, dt, drive,
-                            progress.impulses, planar, settings, progress.radius)
+                            progress.impulses, planar, settings, progress.radius, step.split)
         step.times["assemble"] += time.perf_counter() - t0
+        step.times["assemble_cpu"] += time.process_time() - c0
         if linear is None:  # nothing asks for a push: the free motion is the answer
             progress.impulses, progress.last, progress.trusting = np.zeros((cells.n, 7)), ContactImpulses.empty(), 0
             continue
@@ -483,6 +495,7 @@ def position_step(
             break
     # The loop always ends on a detection at the positions of the impulses it kept.
     step.times["total"] = time.perf_counter() - step.started
+    step.times["total_cpu"] = time.process_time() - step.started_cpu
     result = _result(progress, cells, now, contacts, diameter, converged, iteration, excess, start_overlap, ids, dt,
                      drive, message, step.times)
     if not converged and on_failure == "raise":
@@ -509,6 +522,7 @@ class _Step:
     floors: Floors
     times: dict[str, float]
     started: float
+    started_cpu: float
 
 
 def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], planar: bool, settings: PositionSettings,
@@ -517,24 +531,26 @@ def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], plan
     """The step's set-up: the search's reach, the free motion and the prediction, one broad phase
     for both and the start (:func:`first_pairs`), the floors of the pairs that start overlapping;
     ``(step, start_overlap)``."""
-    started = time.perf_counter()
+    started, started_cpu = time.perf_counter(), time.process_time()
     form = next(f for f in ("contact", "primal") if f in spec.forms and (not settings.bounded or f in spec.bounds))
     reach = search_margin(settings, planar) * 2.0 * float(np.median(cells.radii)) if cells.n else 0.0
-    free = move(cells, dt, drive)
-    predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
     split, span = Split(comm), cells.n + len(planes) + 1
+    split.own(cells)  # the slabs that own the cells (moves, rows, unknowns) for the whole step
+    free = split.moved(cells, dt, drive)
+    predicted = None if motion is None else motion.predict(cells.replace(lengths=free.lengths), ids, dt, parents)
     candidates = first_pairs(cells, free, predicted, reach, split)
     floors, start_overlap = start_floors(cells, planes, planar, span, settings.relaxation, candidates, split)
-    times = {"detect": time.perf_counter() - started, "assemble": 0.0, "solve": 0.0}
+    times = {"detect": time.perf_counter() - started, "assemble": 0.0, "solve": 0.0,
+             "detect_cpu": time.process_time() - started_cpu, "assemble_cpu": 0.0, "solve_cpu": 0.0}
     return _Step(cells, dt, drive, settings, planes, planar, form, reach, span, split, predicted, candidates, floors, times,
-                 started), start_overlap
+                 started, started_cpu), start_overlap
 
 
 def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Contacts, np.ndarray, bool]:
     """Move the cells with the impulses so far, find and evaluate the contacts there and judge
     the iterate (:func:`_judge`); ``(now, contacts, diameter, backtracked)``."""
-    now = move(step.cells, step.dt, step.drive + progress.impulses)
-    t0 = time.perf_counter()
+    now = step.split.moved(step.cells, step.dt, step.drive + progress.impulses)
+    t0, c0 = time.perf_counter(), time.process_time()
     known = progress.found.keys
     first = iteration == 0  # the first linearization also searches where the last step's motion goes
     progress.found = track(progress.found, now, step.predicted if first else None, step.planes, step.reach, step.span,
@@ -542,6 +558,7 @@ def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Cont
     contacts = evaluate(now, progress.found, step.planes, step.planar, step.split)
     diameter = diameters(now, contacts)
     step.times["detect"] += time.perf_counter() - t0
+    step.times["detect_cpu"] += time.process_time() - c0
     return now, contacts, diameter, _judge(progress, contacts, diameter, known, iteration, step.settings)
 
 

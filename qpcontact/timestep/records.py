@@ -128,7 +128,8 @@ class PositionStepResult:
         max_overlap: largest overlap at the end of the step.
         excess: largest shortfall of a contact below its target at the end, as a fraction of the
             pair's diameter (≤ ``overlap_tolerance`` when converged).
-        times: seconds spent in ``detect``, ``assemble``, ``solve`` and in ``total``.
+        times: seconds spent in ``detect``, ``assemble``, ``solve`` and in ``total`` (wall clock), and the
+            CPU seconds of this process in each (``detect_cpu``, ``assemble_cpu``, ``solve_cpu``, ``total_cpu``).
         solver_iterations: the solver's iterations, summed over the step.
         message: why the step did not converge, if it did not.
         warm: the contact impulses keyed by cell ids (``ids`` of :func:`position_step`), the warm

@@ -111,6 +111,47 @@ def test_the_partition_keeps_cells_whole_and_rows_with_their_first_cell():
     assert sorted(np.concatenate([part.rows(0), part.rows(1)])) == list(range(matrix.shape[0]))
 
 
+def test_owners_given_are_taken_and_bad_ones_refused_by_name():
+    matrix = _cells_matrix(40)
+    columns = np.arange(matrix.shape[1]) * 2 // matrix.shape[1]
+    rows = columns[matrix.indices[matrix.indptr[:-1]]]
+    part = Partition(matrix, FakeComm(2), columns, rows)
+    assert np.array_equal(part.columns(1), np.flatnonzero(columns == 1))
+    assert np.array_equal(part.rows(0), np.flatnonzero(rows == 0))
+    with pytest.raises(InvalidArgumentError, match="owners: expected"):
+        Partition(matrix, FakeComm(2), columns + 1, rows)
+    with pytest.raises(InvalidArgumentError, match="owners: expected"):
+        Partition(matrix, FakeComm(2), columns[:-1], rows)
+
+
+@pytest.mark.parametrize("size", [1, 2, 4, 8])
+def test_the_slabs_own_every_cell_once_in_equal_parts(size):
+    """The slabs that own the cells of a distributed step: every cell in one, equal numbers of
+    cells (to one), in order along the colony's longest extent, and those of region_pairs."""
+    from qpcontact.geometry import regions
+
+    rng = np.random.default_rng(1)
+    n = 1001
+    centers = np.column_stack([rng.uniform(0, 100, n), rng.uniform(0, 20, n), np.zeros(n)])
+    cells = qc_cells(centers)
+    owner = regions.slab_owners(cells, size)
+    counts = np.bincount(owner, minlength=size)
+    assert counts.sum() == n and counts.max() - counts.min() <= 1
+    order = np.argsort(centers[:, 0])
+    assert np.all(np.diff(owner[order]) >= 0)  # slabs along x, the longest extent
+    for rank in range(size):
+        pairs = regions.region_pairs(cells, 0.5, None, rank, size)
+        assert np.all(owner[pairs[:, 0]] == rank)
+
+
+def qc_cells(centers: np.ndarray):
+    import qpcontact as qc
+
+    n = len(centers)
+    return qc.Cells(centers=centers, axes=np.tile([1.0, 0.0, 0.0], (n, 1)), lengths=2.0, radii=0.5, masses=1.0,
+                    growth_inertia=np.inf)
+
+
 def test_one_process_owns_everything_in_its_order():
     matrix = _cells_matrix(50)
     part = Partition(matrix, FakeComm(1))
