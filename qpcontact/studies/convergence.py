@@ -71,7 +71,7 @@ TABLED = {2: (*REPORTED[2], "order", "length_mean", "length_sd", "aspect_ratio",
               "aspect_ratio")}
 #: What each run costs, from its history.
 COSTS = ("run_seconds", "steps", "linearizations")
-#: Default step sizes: the run's growth per step (the scene's by default: 0.05 in 2D, 0.0125 in
+#: Default step sizes: the run's growth per step (the scene's by default: 0.05 in 2D, 0.00625 in
 #: 3D) divided by each of these.
 DEFAULT_DIVISORS = (4, 2, 1)
 
@@ -329,7 +329,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     study.add_argument("--growth-per-step", dest="steps", type=comma_list(positive_float), metavar="LIST",
                        help="comma-separated growth time steps (growth of the fastest cell per step, a fraction of "
                             "its length), two or more; the finest is the reference (default: the run's growth per "
-                            "step and two halvings: 0.0125,0.025,0.05 in 2D, 0.003125,0.00625,0.0125 in 3D)")
+                            "step and two halvings: 0.0125,0.025,0.05 in 2D, 0.0015625,0.003125,0.00625 in 3D)")
 
 
 def configure(args: argparse.Namespace) -> tuple[Settings, list[float], list[int]]:

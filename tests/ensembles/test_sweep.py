@@ -219,7 +219,7 @@ def test_a_small_sweep_on_a_two_worker_local_cluster(tmp_path, capsys):
         assert RunFolder(folder).latest_snapshot() is not None
         assert f"growth_inertia_ratio = {float(row['growth_inertia_ratio'])!r}" in (folder / "config.toml").read_text()
         assert row["step"] == (f"position step, ipm at tolerance {PositionSettings().tolerance:g}, overlap ≤ 0.01, "
-                               "search margin 0.75 (by the scene)")  # what ran
+                               "search margin 0.75 (by the scene), growth per step 0.05 (by the scene)")  # what ran
     assert len({row["worker"] for row in summary.values()}) == 2  # both workers ran runs
     assert (out / sweep.ENSEMBLE_FILE).stat().st_size > 10_000
     assert all(run["status"] == "done" for run in json.loads((out / sweep.SWEEP_FILE).read_text())["runs"])

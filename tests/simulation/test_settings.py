@@ -342,7 +342,7 @@ def test_a_config_file_with_the_pressure_settings(tmp_path, capsys):
 def test_the_step_in_words_names_the_search_margin_and_the_step_the_scene_picked():
     assert Settings().describe_step().endswith(", search margin 0.75 (by the scene), growth per step 0.05 (by the scene)")
     assert Settings().updated({"dimensions": 3}).describe_step().endswith(
-        ", search margin 0.5 (by the scene), growth per step 0.0125 (by the scene)")
+        ", search margin 0.5 (by the scene), growth per step 0.00625 (by the scene)")
     given = Settings().updated({"position_margin": 0.4, "growth_per_step": 0.1}).describe_step()
     assert "search margin" not in given and "growth per step" not in given  # given: in config
     # What changes the colony is named (issue 32): a cap on turning, an aim other than the default.
@@ -352,11 +352,11 @@ def test_the_step_in_words_names_the_search_margin_and_the_step_the_scene_picked
 
 
 def test_the_growth_step_is_the_scenes_unless_given():
-    """Issue 32: 0.05 in 2D, 0.0125 in 3D (the 3D biofilm is bent at 0.05), or the setting."""
+    """Issue 32: 0.05 in 2D, 0.00625 in 3D (the 3D biofilm is bent at 0.05), or the setting."""
     colony = Colony.founder(Cells(centers=[[0.0, 0.0, 0.5]], axes=[[1.0, 0.0, 0.0]], lengths=2.0, radii=0.5), 0.7)
     rate = 0.7
     assert Settings().time_step_of(colony) == pytest.approx(np.log1p(0.05) / rate)
-    assert Settings().updated({"dimensions": 3}).time_step_of(colony) == pytest.approx(np.log1p(0.0125) / rate)
+    assert Settings().updated({"dimensions": 3}).time_step_of(colony) == pytest.approx(np.log1p(0.00625) / rate)
     assert Settings().updated({"dimensions": 3, "growth_per_step": 0.05}).time_step_of(colony) == \
         pytest.approx(np.log1p(0.05) / rate)
     with pytest.raises(InvalidArgumentError, match="growth_per_step"):

@@ -132,7 +132,7 @@ def test_a_failed_run_is_reported_by_name_and_the_others_all_the_same(tmp_path, 
     assert statuses["growth_per_step-0.1__seed-1"] == ("failed", "TooManyContactsError: 2.4e6 candidate pairs")
 
 
-@pytest.mark.parametrize("dimensions, steps", [("2", [0.0125, 0.025, 0.05]), ("3", [0.003125, 0.00625, 0.0125])])
+@pytest.mark.parametrize("dimensions, steps", [("2", [0.0125, 0.025, 0.05]), ("3", [0.0015625, 0.003125, 0.00625])])
 def test_the_default_steps_are_the_scenes_step_and_two_halvings(dimensions, steps):
     import argparse
 
