@@ -84,17 +84,25 @@ def kkt_residuals(system: ContactSystem, y: np.ndarray, lam: np.ndarray, lower: 
         "complementarity": float(np.max(np.abs(lam * slack), initial=0.0)) / scale,
     }
     if lower is not None or upper is not None:
-        lo = np.full(y.size, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-        hi = np.full(y.size, np.inf) if upper is None else np.asarray(upper, dtype=float)
-        alpha = np.where(np.isfinite(lo), np.maximum(residual, 0.0), 0.0)
-        beta = np.where(np.isfinite(hi), np.maximum(-residual, 0.0), 0.0)
-        residual = residual - alpha + beta
-        with np.errstate(invalid="ignore"):
-            out["bounds"] = max(0.0, float(np.max(np.maximum(lo - y, y - hi), initial=0.0)))
-            gaps = np.concatenate([np.where(alpha > 0, alpha * (y - lo), 0.0), np.where(beta > 0, beta * (hi - y), 0.0)])
-        out["bound complementarity"] = float(np.max(np.abs(gaps), initial=0.0)) / scale
+        residual, out["bounds"], gap = bound_residuals(y, residual, lower, upper)
+        out["bound complementarity"] = gap / scale
     out["stationarity"] = float(np.linalg.norm(residual)) / max(float(np.linalg.norm(y)), 1.0)
     return out
+
+
+def bound_residuals(y: np.ndarray, residual: np.ndarray, lower: np.ndarray | None,
+                    upper: np.ndarray | None) -> tuple[np.ndarray, float, float]:
+    """The bounds' part of :func:`kkt_residuals`: the stationarity residual ``ỹ − B̃ᵀλ̃`` with
+    the bound multipliers ``α, β`` the answer implies taken out, the largest violation of a
+    bound, and the largest ``|α (ỹ − l)|, |β (u − ỹ)|`` (not yet scaled)."""
+    lo = np.full(y.size, -np.inf) if lower is None else np.asarray(lower, dtype=float)
+    hi = np.full(y.size, np.inf) if upper is None else np.asarray(upper, dtype=float)
+    alpha = np.where(np.isfinite(lo), np.maximum(residual, 0.0), 0.0)
+    beta = np.where(np.isfinite(hi), np.maximum(-residual, 0.0), 0.0)
+    with np.errstate(invalid="ignore"):
+        violation = max(0.0, float(np.max(np.maximum(lo - y, y - hi), initial=0.0)))
+        gaps = np.concatenate([np.where(alpha > 0, alpha * (y - lo), 0.0), np.where(beta > 0, beta * (hi - y), 0.0)])
+    return residual - alpha + beta, violation, float(np.max(np.abs(gaps), initial=0.0))
 
 
 def distance(y: np.ndarray, reference: np.ndarray) -> float:

@@ -212,15 +212,8 @@ def _shared_acceptance(system: ContactSystem, formulation: str, y: np.ndarray, l
     checks = {"penetrates by": split.most(max(0.0, -float(slack.min(initial=0.0)))) / largest_rhs,
               "has complementarity residual": split.most(float(np.max(np.abs(lam[rows] * slack), initial=0.0))) / scale,
               "pulls with relative contact impulse": max(0.0, -float(lam.min(initial=0.0))) / scale}
-    lo = np.full(y.size, -np.inf) if lower is None else np.asarray(lower, dtype=float)
-    hi = np.full(y.size, np.inf) if upper is None else np.asarray(upper, dtype=float)
-    alpha = np.where(np.isfinite(lo), np.maximum(residual, 0.0), 0.0)
-    beta = np.where(np.isfinite(hi), np.maximum(-residual, 0.0), 0.0)
-    residual = residual - alpha + beta
-    with np.errstate(invalid="ignore"):
-        checks["violates a bound by"] = max(0.0, float(np.max(np.maximum(lo - y, y - hi), initial=0.0)))
-        gaps = np.concatenate([np.where(alpha > 0, alpha * (y - lo), 0.0), np.where(beta > 0, beta * (hi - y), 0.0)])
-    checks["has bound complementarity residual"] = float(np.max(np.abs(gaps), initial=0.0)) / scale
+    residual, checks["violates a bound by"], gap = metrics.bound_residuals(y, residual, lower, upper)
+    checks["has bound complementarity residual"] = gap / scale
     checks["has stationarity residual (bounds included)"] = float(np.linalg.norm(residual)) / max(
         float(np.linalg.norm(y)), 1.0)
     for what, value in checks.items():
