@@ -17,8 +17,9 @@ meshio = pytest.importorskip("meshio", reason="ParaView files need the extra qpc
 @pytest.fixture(scope="module")
 def run_3d(tmp_path_factory):
     out = tmp_path_factory.mktemp("biofilm")
+    # growth 0.05 a step (the 3D default is 0.00625): every snapshot then has cells in contact
     assert main(["simulate", "--dimensions", "3", "--cells", "12", "--vtk", "--snapshot-every", "20", "--max-dt", "0.1",
-                 "--out", str(out), "--quiet"]) == 0
+                 "--growth-per-step", "0.05", "--out", str(out), "--quiet"]) == 0
     return out
 
 
