@@ -29,13 +29,13 @@ from typing import Any
 import numpy as np
 
 from ..cli import output_folder, positive_float, positive_int, run_standalone
-from ..errors import InvalidArgumentError, ModelHookError, OutputFolderError
+from ..errors import InvalidArgumentError, OutputFolderError
 from ..io.cellmodeller import CellModellerState, load_pickle, read_cellmodeller
 from ..io.runs import RunFolder, latest_snapshot
 from ..io.snapshots import Snapshot, load_snapshot
 from ..simulation.loop import Run, run_colony
 from ..simulation.settings import ModelSettings, OutputSettings, RunSettings, Settings
-from ..simulation.simulate import exit_status
+from ..simulation.simulate import report_stop
 from .bridge import ModelHook
 from .model import Model, load_model
 from .pickles import PickleWriter
@@ -259,19 +259,10 @@ def run_command(args: argparse.Namespace) -> int:
         print("not kept in snapshots (kept in the pickles): " + "; ".join(f"{k} ({v})" for k, v in
                                                                           outcome.hook.left_out.items()))
     print(describe_written([*folder.written, *outcome.pickles[-1:]]))
-    status = exit_status(run, outcome.settings)
-    if run.interrupted:
-        print(f"qpcontact cellmodeller: stopped by signal {run.interrupted} at step {run.steps}; continue with: "
-              f"qpcontact cellmodeller {args.model} --resume --out {folder.path}", file=sys.stderr)
-    elif run.error:
-        if isinstance(run.exception, ModelHookError) and run.exception.__cause__ is not None:
-            import traceback
-
-            traceback.print_exception(run.exception.__cause__, file=sys.stderr)
-        print(f"qpcontact cellmodeller: {run.error}", file=sys.stderr)
-    elif status == 3:
-        print(f"qpcontact cellmodeller: stopped at step {run.steps} (--steps) with {run.colony.cells.n} of "
-              f"{outcome.settings.run.cells} cells; continue with --resume --steps N (exit status 3)", file=sys.stderr)
+    status = report_stop(run, outcome.settings, "qpcontact cellmodeller",
+                         f"qpcontact cellmodeller {args.model} --resume --out {folder.path}",
+                         f"(--steps) with {run.colony.cells.n} of {outcome.settings.run.cells} cells; continue with "
+                         "--resume --steps N")
     if outcome.settings.run.cells < args.cells and not run.error:
         print(f"note: the model's max_cells {outcome.model.max_cells} stops the run before --cells {args.cells}",
               file=sys.stderr)

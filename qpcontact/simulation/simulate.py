@@ -264,18 +264,26 @@ def run_command(args: argparse.Namespace) -> int:
           f"{'' if comm is None else f' on {comm.Get_size()} MPI processes'}: contact solve "
           f"{np.sum(result.history['solve_seconds']):.1f} s; {settings.describe_growth()}")
     print(describe_written(folder.written))
+    return report_stop(result, settings, "qpcontact simulate", f"qpcontact simulate --resume --out {folder.path}",
+                       f"(--max-steps {settings.run.max_steps}) with {result.colony.cells.n} of the {settings.run.cells} "
+                       f"cells of --cells; continue with: qpcontact simulate --resume --max-steps N --out {folder.path}")
+
+
+def report_stop(result: loop.Run, settings: Settings, program: str, resume: str, short: str) -> int:
+    """Say on stderr why a run stopped before its end, if it did, and return its
+    :func:`exit_status`: a signal (and ``resume``, the command that continues it), an error (a
+    model hook's own traceback first), or too few cells (``short``: which limit stopped it and how
+    to go on)."""
     status = exit_status(result, settings)
     if result.interrupted:
-        print(f"qpcontact simulate: stopped by signal {result.interrupted} at step {result.steps}; continue with: "
-              f"qpcontact simulate --resume --out {folder.path}", file=sys.stderr)
+        print(f"{program}: stopped by signal {result.interrupted} at step {result.steps}; continue with: {resume}",
+              file=sys.stderr)
     elif result.error:
         if isinstance(result.exception, ModelHookError) and result.exception.__cause__ is not None:
             traceback.print_exception(result.exception.__cause__, file=sys.stderr)
-        print(f"qpcontact simulate: {result.error}", file=sys.stderr)
+        print(f"{program}: {result.error}", file=sys.stderr)
     elif status == EXIT_SHORT:
-        print(f"qpcontact simulate: stopped at step {result.steps} (--max-steps {settings.run.max_steps}) with "
-              f"{result.colony.cells.n} of the {settings.run.cells} cells of --cells; continue with: qpcontact simulate "
-              f"--resume --max-steps N --out {folder.path} (exit status {EXIT_SHORT})", file=sys.stderr)
+        print(f"{program}: stopped at step {result.steps} {short} (exit status {EXIT_SHORT})", file=sys.stderr)
     return status
 
 
