@@ -132,8 +132,9 @@ class PositionSettings:
         1e-4, unit="dimensionless, scaled", above=0, below=1,
         help="its tolerance, in the scaled units of qpcontact.assembly.system (impulses relative to the largest, "
              "velocities relative to the fastest approach): at 10⁻⁴ a grown colony's end positions are within "
-             "3·10⁻⁴ of a diameter of the exact step's, at 10⁻³ within 3·10⁻³, for 14 interior-point iterations "
-             "instead of 11 (a grown 2D colony of 5,000 cells; docs/model-notes.md)")
+             "3·10⁻⁴ of a diameter of the exact step's, at 10⁻³ within 3·10⁻³, for 13 interior-point iterations "
+             "instead of 10 (a grown 2D colony of 5,000 cells; docs/model-notes.md); 10⁻³ bends the colony (local "
+             "order +0.04, larger microdomains), 10⁻⁵ gives the colony of 10⁻⁴ (docs/statistics.md)")
 
     def __post_init__(self) -> None:
         check_fields(self)
