@@ -49,7 +49,15 @@ from ..io.outputs import describe_written, prepare_folder, replacing, write_csv,
 from ..io.runs import LEFTOVERS, RUN_OUTPUTS, RunFolder
 from ..io.snapshots import load_snapshot
 from ..schema import Layer, settings_of
-from ..simulation.settings import Settings, add_setting_flags, file_layer, flag_layer, merge, refuse_unused
+from ..simulation.settings import (
+    GROWTH_PER_STEP,
+    Settings,
+    add_setting_flags,
+    file_layer,
+    flag_layer,
+    merge,
+    refuse_unused,
+)
 
 FORMAT = "qpcontact-convergence"
 PLAN_FILE = "convergence.json"
@@ -329,7 +337,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     study.add_argument("--growth-per-step", dest="steps", type=comma_list(positive_float), metavar="LIST",
                        help="comma-separated growth time steps (growth of the fastest cell per step, a fraction of "
                             "its length), two or more; the finest is the reference (default: the run's growth per "
-                            "step and two halvings: 0.0125,0.025,0.05 in 2D, 0.0015625,0.003125,0.00625 in 3D)")
+                            "step and two halvings: " + "; ".join(
+                                f"{','.join(f'{step / k:g}' for k in DEFAULT_DIVISORS)} in {d}D"
+                                for d, step in GROWTH_PER_STEP.items()) + ")")
 
 
 def configure(args: argparse.Namespace) -> tuple[Settings, list[float], list[int]]:
