@@ -58,7 +58,7 @@ def multiplier_consistency(system: ContactSystem, y: np.ndarray, lam: np.ndarray
 
 
 def kkt_residuals(system: ContactSystem, y: np.ndarray, lam: np.ndarray, lower: np.ndarray | None = None,
-                  upper: np.ndarray | None = None) -> dict[str, float]:
+                  upper: np.ndarray | None = None, gradient: np.ndarray | None = None) -> dict[str, float]:
     """How far ``(ỹ, λ̃)`` is from satisfying the KKT conditions of the complementarity QP
     ``min ½‖ỹ‖²  s.t. B̃ỹ ≥ b̃`` (model.md), with bounds ``l ≤ ỹ ≤ u`` when given (the
     position-level step's): a certificate of optimality that needs no other solver, since the QP
@@ -74,10 +74,12 @@ def kkt_residuals(system: ContactSystem, y: np.ndarray, lam: np.ndarray, lower: 
     - with bounds, ``bounds``: the largest violation of a bound, and ``bound complementarity``:
       ``max |α (ỹ − l)|, |β (u − ỹ)|`` (a bound that acts is met exactly).
 
-    All are 0 exactly at the optimum."""
+    All are 0 exactly at the optimum. ``gradient``: the objective's gradient at ``ỹ`` when it is
+    not ``½‖ỹ‖²``'s (a sequential QP's curvature, :attr:`qpcontact.solvers.Problem.gradient`):
+    the stationarity is then ``gradient − B̃ᵀλ̃ − α + β``."""
     slack = system.matrix @ y - system.rhs
     scale = max(float(np.abs(lam).max(initial=0.0)), 1.0)
-    residual = y - system.matrix.T @ lam
+    residual = (y if gradient is None else gradient) - system.matrix.T @ lam
     out = {
         "primal": max(0.0, -float(slack.min(initial=0.0))),
         "dual": max(0.0, -float(lam.min(initial=0.0))) / scale,

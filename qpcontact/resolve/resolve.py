@@ -122,7 +122,8 @@ def _check_options(solver: str, formulation: str, form: str, tolerance: float, t
 
 
 def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, lam: np.ndarray | None,
-                       tolerance: float, lower: np.ndarray | None = None, upper: np.ndarray | None = None) -> str:
+                       tolerance: float, lower: np.ndarray | None = None, upper: np.ndarray | None = None,
+                       gradient: np.ndarray | None = None) -> str:
     """Why a reported solution is not accepted, or ``""`` when it is (docs/model-notes.md,
     "Accepting an answer"). What ``tolerance`` promises: each measure below, in the scaled units
     of :mod:`qpcontact.assembly.system` (``max b̃ = 1``), is at most
@@ -145,25 +146,28 @@ def acceptance_failure(system: ContactSystem, formulation: str, y: np.ndarray, l
     (:func:`~qpcontact.resolve.metrics.kkt_residuals`: complementarity with the impulses relative
     to the largest, stationarity with the bound multipliers the answer implies, bound violation
     and bound complementarity) in place of the duality gap and the multiplier consistency, which
-    assume no bounds."""
+    assume no bounds. An objective with curvature (``gradient``, its gradient at ``ỹ``:
+    :attr:`qpcontact.solvers.Problem.gradient`) is judged by the same KKT conditions."""
     limit = acceptance_limit(tolerance)
+    if system.owned_rows is not None and gradient is not None:
+        raise InvalidArgumentError("gradient: a system shared among processes is judged without curvature")
     if system.owned_rows is not None:
         return _shared_acceptance(system, formulation, y, lam, limit, lower, upper)
     checks = {"penetrates by": metrics.penetration(system, y)}
     bounded = lower is not None or upper is not None
     if formulation == "complementarity" and lam is None:
         return "the answer has no contact impulses, so its complementarity cannot be checked"
-    if formulation == "complementarity" and bounded:
+    if formulation == "complementarity" and (bounded or gradient is not None):
         assert lam is not None
-        kkt = metrics.kkt_residuals(system, y, lam, lower, upper)
+        kkt = metrics.kkt_residuals(system, y, lam, lower, upper, gradient)
         # Impulses relative to the largest, as the solvers measure them: in a jammed colony they
         # reach hundreds of times the scale of one collision, and an absolute λ̃ of 10⁻⁵ at a
         # contact that does not push is rounding of that scale.
         checks.update({"has complementarity residual": kkt["complementarity"],
                        "pulls with relative contact impulse": kkt["dual"],
                        "has stationarity residual (bounds included)": kkt["stationarity"],
-                       "violates a bound by": kkt["bounds"],
-                       "has bound complementarity residual": kkt["bound complementarity"]})
+                       "violates a bound by": kkt.get("bounds", 0.0),
+                       "has bound complementarity residual": kkt.get("bound complementarity", 0.0)})
     elif formulation == "complementarity":
         assert lam is not None
         checks["has complementarity residual"] = metrics.complementarity_residual(system, y, lam)

@@ -170,6 +170,7 @@ class GramMatrix:
         # a row of A: the first of a pair is the larger column, the row of the lower triangle).
         position = np.searchsorted(keys, csr.indices[second].astype(np.int64) * n + csr.indices[first])
         self.diagonal_position = np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
+        self._keys = keys
         self.size = keys.size
         self.shape = (n, n)
         # P: one row per entry, one column per row of A (each row of A adds to an entry at most
@@ -203,9 +204,25 @@ class GramMatrix:
         self._scatter.data = (csr.data[self._first] * csr.data[self._second])[self._order]
         return True
 
+    def stored(self, symmetric: sp.spmatrix) -> np.ndarray | None:
+        """The values of a symmetric n × n matrix in the stored order (:meth:`values`'s), to be
+        added to every refill (``extra`` of :meth:`factor`); None when its pattern is not within
+        this one's."""
+        lower = sp.tril(sp.csc_matrix(symmetric), format="csc")
+        lower.sum_duplicates()
+        keys = np.repeat(np.arange(self.shape[0], dtype=np.int64), np.diff(lower.indptr)) * self.shape[0] + lower.indices
+        position = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
+        if not np.array_equal(self._keys[position], keys):
+            return None
+        out = np.zeros(self.size)
+        np.add.at(out, position, lower.data)
+        return out
+
     def values(self, w: np.ndarray, d: np.ndarray) -> np.ndarray:
-        """The stored (lower-triangle, CSC-ordered) values for these weights."""
-        data = self._scatter @ w
+        """The stored (lower-triangle, CSC-ordered) values for these weights (rows of ``A`` past
+        the end of ``w`` weigh 0)."""
+        rows = self._scatter.shape[1]
+        data = self._scatter @ (w if w.size == rows else np.concatenate([w, np.zeros(rows - w.size)]))
         data[self.diagonal_position] += d
         return data
 
@@ -214,14 +231,17 @@ class GramMatrix:
         indptr, indices = self._lower_pattern
         return sp.csc_matrix((self.values(w, d), indices, indptr), shape=self.shape)
 
-    def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
-        """Factorize for these weights; returns a function ``v ↦ (diag(d) + Aᵀ diag(w) A)⁻¹ v``.
+    def factor(self, w: np.ndarray, d: np.ndarray, extra: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
+        """Factorize for these weights; returns a function ``v ↦ (diag(d) + Aᵀ diag(w) A + E)⁻¹ v``,
+        ``E`` the matrix whose stored values are ``extra`` (:meth:`stored`; None: 0).
 
         Raises:
             ArithmeticError: the matrix is not numerically positive definite (CHOLMOD's error, or
                 PARDISO's).
         """
         values = self.values(w, d)
+        if extra is not None:
+            values += extra
         if self.backend == "pardiso":
             return self._factor_pardiso(values)
         data = cvxopt.matrix(values)

@@ -48,6 +48,7 @@ runs this same code on each process's part of the problem.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -127,6 +128,17 @@ class _Rows:
     c: np.ndarray  # (K + L + U,) right-hand sides
     reduce: Reductions = SERIAL  # over the parts of a distributed solve
     m: int = 0  # the number of rows over every part (make_rows counts them once)
+    curvature: sp.csr_matrix | None = None  # R of the objective's ½‖R(ỹ − ỹ₀)‖² (None: none)
+    anchor: np.ndarray | None = None  # ỹ₀
+    curvature_values: np.ndarray | None = None  # RᵀR in the normal matrix's stored order
+
+    def gradient(self, y: np.ndarray) -> np.ndarray:
+        """The objective's gradient ``ỹ + RᵀR(ỹ − ỹ₀)``."""
+        if self.curvature is None:
+            return y
+        assert self.anchor is not None
+        return y + self.curvature.T @ (self.curvature @ (y - self.anchor))
+
 
     @property
     def k(self) -> int:
@@ -220,7 +232,7 @@ class _InUnknowns(_Newton):
         x, rows = self.x, self.rows
         self.slack = x.z + self.regularization * x.v
         weight = x.v / self.slack
-        self.solve = matrix.factor(weight[:rows.k], _bound_diagonal(rows, weight))
+        self.solve = matrix.factor(weight[:rows.k], _bound_diagonal(rows, weight), rows.curvature_values)
 
     def direction(self, target: np.ndarray) -> _Iterate:
         x, rows = self.x, self.rows
@@ -282,6 +294,7 @@ def interior_point(
     initial: np.ndarray | None = None,
     warm_shift: float = 1e-2,
     space: str = "auto",
+    curvature: tuple[sp.spmatrix, np.ndarray] | None = None,
 ) -> IterativeSolution:
     """Solve ``min ½‖ỹ‖² s.t. B̃ỹ ≥ b̃, l ≤ ỹ ≤ u`` (module docstring).
 
@@ -297,6 +310,8 @@ def interior_point(
         space: the space of the Newton systems: ``"unknowns"`` (:class:`_InUnknowns`),
             ``"contacts"`` (:class:`_InContacts`), or ``"auto"``: the unknowns, then the contacts
             below :data:`UNKNOWNS_ACCURACY` (the default; the others are for measurements).
+        curvature: ``(R, ỹ₀)``: the objective is ``½‖ỹ‖² + ½‖R(ỹ − ỹ₀)‖²`` (a sequential
+            QP's curvature of the constraints); the Newton systems are then in the unknowns.
 
     Returns:
         :class:`~qpcontact.solvers.registry.IterativeSolution` with the best iterate (smallest
@@ -306,7 +321,8 @@ def interior_point(
         ``"infeasible"`` (a bound interval is empty).
     """
     with quiet_numpy():  # numpy's BLAS threads out of the factorization's way
-        return _iterate(matrix, rhs, lower, upper, tolerance, max_iterations, time_limit, initial, warm_shift, space)
+        return _iterate(matrix, rhs, lower, upper, tolerance, max_iterations, time_limit, initial, warm_shift, space,
+                        curvature)
 
 
 def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | None, lo: np.ndarray,
@@ -352,7 +368,7 @@ def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | 
 
 def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upper: np.ndarray | None,
              tolerance: float, max_iterations: int | None, time_limit: float | None, initial: np.ndarray | None,
-             warm_shift: float, space: str) -> IterativeSolution:
+             warm_shift: float, space: str, curvature: tuple[sp.spmatrix, np.ndarray] | None = None) -> IterativeSolution:
     """:func:`interior_point` in one process: its rows and normal matrix, then :func:`iterate_rows`."""
     check_options(tolerance, max_iterations, time_limit)
     if space not in ("auto", "unknowns", "contacts"):
@@ -367,6 +383,20 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
     # The normal matrices in the unknowns and in the contacts, made when first needed.
     normal: GramMatrix | None = None if space == "contacts" else _gram_matrix(B)
+    if curvature is not None:
+        # The curvature's RᵀR lies in the normal matrix's pattern (a row of R couples the cells
+        # of one contact, as the row of B̃ does: the pattern and its analysis are kept): added to
+        # each refill, in the unknowns only.
+        R = sp.csr_matrix(curvature[0])
+        if normal is None:
+            normal = _gram_matrix(B)
+        values = normal.stored(R.T @ R)
+        if values is None:  # it couples unknowns no contact couples: a pattern for both
+            normal = GramMatrix(sp.vstack([B, R], format="csr"))
+            values = normal.stored(R.T @ R)
+        rows = dataclasses.replace(rows, curvature=R, anchor=np.asarray(curvature[1], dtype=float),
+                                   curvature_values=values)
+        space = "unknowns"
     return iterate_rows(rows, normal, lo, hi, start=start, tolerance=tolerance, max_iterations=max_iterations,
                         time_limit=time_limit, initial=initial, warm_shift=warm_shift, space=space)
 
@@ -411,7 +441,7 @@ def iterate_rows(rows: _Rows, normal: Any, lo: np.ndarray, hi: np.ndarray, *, st
     status, iteration, regularization = "max_iterations", 0, REGULARIZATION
     for iteration in range(cap + 1):
         gap = rows.apply(x.y) - rows.c
-        r_dual = x.y - rows.transpose(x.v)
+        r_dual = rows.gradient(x.y) - rows.transpose(x.v)
         error = _error(rows, x, gap, r_dual)
         if error < best_error:
             best_error, best, best_iteration = error, x, iteration
@@ -510,8 +540,9 @@ def _gram_matrix(matrix: sp.csr_matrix) -> GramMatrix:
 
 def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
            settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
+    curvature = None if problem.curvature is None or problem.anchor is None else (problem.curvature, problem.anchor)
     out = interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
-                         time_limit=time_limit, max_iterations=settings.get("max_iterations"))
+                         time_limit=time_limit, max_iterations=settings.get("max_iterations"), curvature=curvature)
     return out.output()
 
 
@@ -519,5 +550,5 @@ register(SolverSpec(
     "ipm", formulations=("complementarity",), forms=("contact",), warm_start=False, time_limit=True, solve=_solve,
     description="built-in primal-dual interior point (sparse Cholesky of the normal equations in the unknowns), "
                 "takes bounds on ỹ",
-    settings=("max_iterations",), blockwise=True, bounds=("contact",), bundled=True,
+    settings=("max_iterations",), blockwise=True, bounds=("contact",), bundled=True, curvature=True,
 ))

@@ -68,6 +68,11 @@ class Problem:
             has none), or None: only solvers declaring :attr:`SolverSpec.bounds` take them (the
             position-level step bounds the turning and shrinking of cells with them). With
             bounds, ``ỹ = B̃ᵀλ̃ + α − β`` (the bound multipliers), not ``B̃ᵀλ̃``.
+        curvature, anchor: ``R`` (r, n) sparse and ``ỹ₀`` (n,): the objective is
+            ``½‖ỹ‖² + ½‖R(ỹ − ỹ₀)‖²`` (a sequential QP's curvature of its constraints:
+            :mod:`qpcontact.assembly.curvature`), or None: ``½‖ỹ‖²``. Only solvers declaring
+            :attr:`SolverSpec.curvature` take it; the stationarity is then
+            ``ỹ + RᵀR(ỹ − ỹ₀) = B̃ᵀλ̃ (+ α − β)`` (:meth:`gradient`).
     """
 
     matrix: sp.csr_matrix
@@ -76,6 +81,15 @@ class Problem:
     regularization: float = 0.0
     lower: np.ndarray | None = None
     upper: np.ndarray | None = None
+    curvature: sp.csr_matrix | None = None
+    anchor: np.ndarray | None = None
+
+    def gradient(self, y: np.ndarray) -> np.ndarray:
+        """The objective's gradient at ``ỹ``: ``ỹ + RᵀR(ỹ − ỹ₀)`` (``ỹ`` without curvature)."""
+        if self.curvature is None:
+            return y
+        assert self.anchor is not None
+        return y + self.curvature.T @ (self.curvature @ (y - self.anchor))
 
     @property
     def bounded(self) -> bool:
@@ -114,8 +128,12 @@ class Problem:
         def part(values: np.ndarray | None) -> np.ndarray | None:
             return None if values is None else values[columns]
 
+        curvature = None
+        if self.curvature is not None:  # its rows couple the cells of one contact: one block
+            curvature = sp.csr_matrix(self.curvature)[:, columns]
+            curvature = curvature[np.flatnonzero(np.diff(curvature.indptr))]
         return Problem(self.matrix[rows][:, columns], self.rhs[rows], part(self.column_inverse_mass),
-                       self.regularization, part(self.lower), part(self.upper))
+                       self.regularization, part(self.lower), part(self.upper), curvature, part(self.anchor))
 
 
 @dataclass
@@ -238,6 +256,7 @@ class SolverSpec:
         install_hint: how to install it, said when ``available()`` is false.
         bounds: the forms in which it takes bounds on ``ỹ`` (:attr:`Problem.lower`,
             :attr:`Problem.upper`).
+        curvature: it takes the objective's curvature (:attr:`Problem.curvature`).
     """
 
     name: str
@@ -256,6 +275,7 @@ class SolverSpec:
     bundled: bool = False
     install_hint: str = "is not installed"
     bounds: tuple[str, ...] = ()
+    curvature: bool = False
 
     @property
     def plain(self) -> bool:
@@ -394,6 +414,8 @@ def solve(
     if problem.bounded and form not in spec.bounds:
         where = f"in {_words(spec.bounds)} form only" if spec.bounds else "none"
         raise InvalidArgumentError(f"bounds: solver {solver!r} takes bounds on ỹ {where} (form {form!r})")
+    if problem.curvature is not None and not spec.curvature:
+        raise InvalidArgumentError(f"curvature: solver {solver!r} takes no curvature of the objective (ipm does)")
     if spec.blockwise:
         return solve_by_blocks(spec, problem, formulation, form, tolerance=tolerance, time_limit=time_limit,
                                settings=settings, initial=initial, split=split)

@@ -48,6 +48,7 @@ from ..io.outputs import atomic_write, describe_written, prepare_folder, write_t
 from ..simulation import Settings, run_colony
 from ..simulation.steps import sink_drive, step_function
 from ..timestep import PositionStepResult
+from ..timestep.position import SECOND_ORDER_TIGHTEST, uses_second_order
 from .bench import machine_description
 from .harness import guarded
 
@@ -131,6 +132,17 @@ def step_time_slope(cells: np.ndarray, seconds: np.ndarray, sizes: list[int]) ->
 REFERENCE_TOLERANCE = 1e-8
 
 
+def reference_changes(settings: Settings) -> dict[str, Any]:
+    """The settings of the tight step a position step is compared with: its own method at
+    :data:`REFERENCE_TOLERANCE`, or, for a second-order step, second order at the tightest
+    tolerance its solves reach (a first-order reference takes another path of linearizations,
+    and the step stops at the first one within the overlap tolerance: its end is another point
+    of that tolerance, up to 0.17 of a diameter away on a grown colony of 400 cells)."""
+    if uses_second_order(settings.position):
+        return {"position_tolerance": SECOND_ORDER_TIGHTEST, "position_second_order": True}
+    return {"position_tolerance": REFERENCE_TOLERANCE}
+
+
 def end_difference(a: Colony, b: Colony) -> float:
     """Largest distance between the same cell's centres or tips in two states [diameters]."""
     ca, cb = a.cells, b.cells
@@ -159,7 +171,7 @@ def step_once(state: str, dimensions: int, label: str, step: str, changes: dict[
     common = dict(label=label, seconds=float(np.median(seconds)), cells=colony.cells.n, dt=outcome.dt)
     if isinstance(result, PositionStepResult):
         # The same step at a tight solver tolerance: how far the end positions are from its.
-        tight = _settings(dimensions, step, 10**9, {**changes, "position_tolerance": REFERENCE_TOLERANCE})
+        tight = _settings(dimensions, step, 10**9, {**changes, **reference_changes(settings)})
         reference = step_function(tight, {})(colony, outcome.dt, drive=drive)
         return dict(common, contacts=len(result.contacts), linearizations=result.iterations,
                     solver_iterations=result.solver_iterations, max_overlap=result.max_overlap,

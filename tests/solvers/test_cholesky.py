@@ -85,3 +85,21 @@ def test_a_matrix_that_is_not_positive_definite_is_an_arithmetic_error(backend):
     gram = GramMatrix(A)
     with pytest.raises(ArithmeticError):
         gram.factor(np.zeros(A.shape[0]), -np.ones(A.shape[1]))
+
+
+def test_a_constant_matrix_within_the_pattern_is_added_to_every_factorization():
+    """GramMatrix.stored: the values of a symmetric matrix in the pattern of AᵀA (none outside
+    it), added by factor(..., extra)."""
+    import scipy.sparse as sp
+
+    from qpcontact.solvers.cholesky import GramMatrix
+
+    A = sp.csr_matrix(np.array([[1.0, 2.0, 0.0], [0.0, 1.0, 3.0]]))
+    gram = GramMatrix(A)
+    E = sp.csr_matrix(np.array([[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 1.0]]))
+    w, d = np.array([1.0, 2.0]), np.ones(3)
+    solve = gram.factor(w, d, gram.stored(E))
+    matrix = np.diag(d) + A.T.toarray() @ np.diag(w) @ A.toarray() + E.toarray()
+    v = np.array([1.0, -2.0, 0.5])
+    assert np.allclose(solve(v), np.linalg.solve(matrix, v))
+    assert gram.stored(sp.csr_matrix(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))) is None

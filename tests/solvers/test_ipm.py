@@ -148,3 +148,30 @@ def test_resolve_with_ipm_passes_the_acceptance_checks():
     reference = qc.resolve(cells, solver="clarabel", tolerance=1e-10)
     assert result.converged
     assert np.max(np.abs(result.impulses - reference.impulses)) <= 1e-5 * np.max(np.abs(reference.impulses))
+
+
+def test_the_objective_s_curvature_gives_the_qp_s_own_answer():
+    """``curvature=(R, ỹ₀)``: min ½‖ỹ‖² + ½‖R(ỹ − ỹ₀)‖² with bounds, as Clarabel solves it; R
+    coupling unknowns no contact row couples (its own pattern) and, through solve(), blockwise."""
+    import qpsolvers
+    import scipy.sparse as sp
+
+    from qpcontact.solvers import Problem, solve
+    from qpcontact.solvers.ipm import interior_point
+
+    rng = np.random.default_rng(0)
+    k, n = 60, 40
+    B = sp.random(k, n, density=0.1, random_state=1, format="csr")
+    b = rng.standard_normal(k)
+    R = sp.random(30, n, density=0.1, random_state=2, format="csr") * 3
+    anchor = rng.standard_normal(n)
+    lower, upper = np.full(n, -2.0), np.full(n, 2.0)
+    out = interior_point(B, b, lower, upper, tolerance=1e-8, curvature=(R, anchor))
+    expected = qpsolvers.solve_qp(sp.csc_matrix(sp.identity(n) + R.T @ R), -(R.T @ (R @ anchor)),
+                                  G=sp.csc_matrix(-B), h=-b, lb=lower, ub=upper, solver="clarabel")
+    assert out.converged and np.abs(out.y - expected).max() < 1e-6
+    # Through the registry: the same answer; a solver that takes no curvature is refused by name.
+    problem = Problem(B, b, lower=lower, upper=upper, curvature=R, anchor=anchor)
+    assert np.abs(solve(problem, "ipm", tolerance=1e-8).y - expected).max() < 1e-6
+    with pytest.raises(InvalidArgumentError, match="curvature"):
+        solve(problem, "mprgp", tolerance=1e-8)
