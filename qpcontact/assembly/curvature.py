@@ -64,7 +64,6 @@ def curvature_rows(system: ContactSystem, cells: Cells, contact_impulses: np.nda
     if pushing.size == 0:
         return None
     contacts = system.contacts.subset(pushing)
-    hessians = separation_hessians(cells, contacts)  # (P, 14, 14) in the cells' coordinates
     # The columns of each contact's two cells (the slots any column uses), and their directions.
     n = system.shape[1]
     slots = np.unique(system.column_slot)
@@ -81,7 +80,7 @@ def curvature_rows(system: ContactSystem, cells: Cells, contact_impulses: np.nda
     to_coordinates[:, 7:14, m:] = moves[:, m:].transpose(0, 2, 1)
     # −∇²g_k = −∇²d_k / (dt σ_b) in the columns, weighted by λ̃_k; its positive part.
     weight = system.from_contact_impulses(contact_impulses[pushing]) / (dt * system.velocity_scale)
-    concave = -weight[:, None, None] * (to_coordinates.transpose(0, 2, 1) @ hessians @ to_coordinates)
+    concave = -weight[:, None, None] * separation_hessians(cells, contacts, to_coordinates)
     values, vectors = np.linalg.eigh(concave)  # (P, 2S), (P, 2S, 2S): eigenvectors in columns
     keep = values > SMALLEST_EIGENVALUE * np.maximum(values[:, -1:], 0.0)
     keep &= values > 0

@@ -60,10 +60,16 @@ def _turn_arc(n: np.ndarray, axis: np.ndarray, s: np.ndarray) -> np.ndarray:
                                - np.einsum("ij,ij->i", n, axis)[:, None, None] * np.eye(3))
 
 
-def separation_hessians(cells: Cells, contacts: Contacts) -> np.ndarray:
+def separation_hessians(cells: Cells, contacts: Contacts, directions: np.ndarray | None = None) -> np.ndarray:
     """(K, 14, 14) the Hessian of each contact's separation in the coordinates of its two cells
-    (module docstring), at the cells as they are (those the contacts were evaluated at)."""
+    (module docstring), at the cells as they are (those the contacts were evaluated at).
+
+    ``directions``: (K, 14, m) the moves of those coordinates along ``m`` directions per contact
+    (a linearization's columns): the Hessian along them, ``Tᵀ H T`` (K, m, m), computed in them
+    (a monolayer's 8 columns, not the 14 coordinates)."""
     k = len(contacts)
+    if directions is None:
+        directions = np.broadcast_to(np.eye(14), (k, 14, 14))
     a, b = contacts.cell_a, contacts.cell_b
     pair = b >= 0
     bb = np.where(pair, b, 0)
@@ -77,44 +83,44 @@ def separation_hessians(cells: Cells, contacts: Contacts) -> np.ndarray:
     # How an end rides with its cell's length (a free point does not: it slides instead).
     ride_a = np.where(free_a, 0.0, contacts.stretch_a)
     ride_b = np.where(free_b | ~pair, 0.0, contacts.stretch_b)
-    eye = np.broadcast_to(np.eye(3), (k, 3, 3))
-    # u_q (K, 3, 14): how the axis difference moves with each coordinate.
-    u_q = np.zeros((k, 3, 14))
-    u_q[:, :, 0:3] = eye
-    u_q[:, :, 3:6] = -_cross_matrix(s[:, None] * ax)
-    u_q[:, :, 6] = ride_a[:, None] * ax
-    u_q[:, :, 7:10] = -eye * pair[:, None, None]
-    u_q[:, :, 10:13] = _cross_matrix(t[:, None] * bx)
-    u_q[:, :, 13] = -ride_b[:, None] * bx
-    # n·u_qq: the turns' arcs, and an end riding on a turning rod.
-    second = np.zeros((k, 14, 14))
-    second[:, 3:6, 3:6] = _turn_arc(n, ax, s)
-    second[:, 10:13, 10:13] = -_turn_arc(n, bx, t)
-    ride_turn_a = ride_a[:, None] * np.cross(ax, n)
-    ride_turn_b = -ride_b[:, None] * np.cross(bx, n)
-    second[:, 3:6, 6], second[:, 6, 3:6] = ride_turn_a, ride_turn_a
-    second[:, 10:13, 13], second[:, 13, 10:13] = ride_turn_b, ride_turn_b
-    # The free parameters z = (s, t): u_z (K, 3, 2) and n·u_qz (K, 14, 2).
-    u_z = np.zeros((k, 3, 2))
-    u_z[:, :, 0] = free_a[:, None] * ax
-    u_z[:, :, 1] = -(free_b[:, None] * bx)
-    slide_turn = np.zeros((k, 14, 2))
-    slide_turn[:, 3:6, 0] = free_a[:, None] * np.cross(ax, n)
-    slide_turn[:, 10:13, 1] = -(free_b[:, None] * np.cross(bx, n))
+    move_a, turn_a, grow_a = directions[:, 0:3], directions[:, 3:6], directions[:, 6]
+    move_b, turn_b, grow_b = directions[:, 7:10], directions[:, 10:13], directions[:, 13]
+    # u_T (K, 3, m): how the axis difference moves along each direction (a turn φ moves s·â by
+    # φ × s·â; an end rides along its axis with the length).
+    cross = lambda v, w: np.cross(w, v[:, :, None], axisa=1, axisb=1, axisc=1)  # noqa: E731  (K,3,m) w × v
+    u_t = (move_a + cross(s[:, None] * ax, turn_a) + ride_a[:, None, None] * ax[:, :, None] * grow_a[:, None, :]
+           - pair[:, None, None] * (move_b + cross(t[:, None] * bx, turn_b)
+                                    + ride_b[:, None, None] * bx[:, :, None] * grow_b[:, None, :]))
+    # n·u_TT: the turns' arcs, and an end riding on a turning rod.
+    tt = lambda m, x, y: x.transpose(0, 2, 1) @ (m @ y)  # noqa: E731
+    second = tt(_turn_arc(n, ax, s), turn_a, turn_a) - tt(_turn_arc(n, bx, t), turn_b, turn_b)
+    ride_turn = (np.einsum("ki,kim->km", ride_a[:, None] * np.cross(ax, n), turn_a)[:, :, None] * grow_a[:, None, :]
+                 - np.einsum("ki,kim->km", ride_b[:, None] * np.cross(bx, n), turn_b)[:, :, None] * grow_b[:, None, :])
+    second += ride_turn + ride_turn.transpose(0, 2, 1)
+    # The free parameters z = (s, t): u_z (K, 3, 2) and n·u_Tz (K, m, 2).
+    u_z = np.stack([free_a[:, None] * ax, -(free_b[:, None] * bx)], axis=2)
+    slide_turn = np.stack([np.einsum("ki,kim->km", free_a[:, None] * np.cross(ax, n), turn_a),
+                           -np.einsum("ki,kim->km", free_b[:, None] * np.cross(bx, n), turn_b)], axis=2)
     # The normal's turning, P/|u| (none for a plane: its normal is fixed).
     radii = cells.radii[a] + np.where(pair, cells.radii[bb], 0.0)
-    distance = np.maximum(contacts.separation + radii, SMALLEST_DISTANCE * radii)
-    project = (eye - n[:, :, None] * n[:, None, :]) * (pair / distance)[:, None, None]
-    pu_q = project @ u_q
-    d_qq = u_q.transpose(0, 2, 1) @ pu_q + second
-    d_qz = pu_q.transpose(0, 2, 1) @ u_z + slide_turn
-    d_zz = u_z.transpose(0, 2, 1) @ project @ u_z
+    weight = pair / np.maximum(contacts.separation + radii, SMALLEST_DISTANCE * radii)
+    def projected(x: np.ndarray, y: np.ndarray) -> np.ndarray:  # xᵀ P y / |u|
+        return (np.einsum("kim,kil->kml", x, y) - np.einsum("ki,kim->km", n, x)[:, :, None]
+                * np.einsum("ki,kil->kl", n, y)[:, None, :]) * weight[:, None, None]
+    d_tt = projected(u_t, u_t) + second
+    d_tz = projected(u_t, u_z) + slide_turn
+    d_zz = projected(u_z, u_z)
     # A parameter that is not free is decoupled (its row of D_zz is the identity's).
-    fixed = np.stack([~free_a, ~free_b], axis=1)
-    d_zz[:, 0, 0] += fixed[:, 0]
-    d_zz[:, 1, 1] += fixed[:, 1]
+    d_zz[:, 0, 0] += ~free_a
+    d_zz[:, 1, 1] += ~free_b
     # A pseudo-inverse: two free points of rods that cross (or lie parallel) can slide together
-    # with no change of distance, a direction of D_zz with no curvature, which no slide follows.
-    values, vectors = np.linalg.eigh(d_zz)
-    inverse = np.where(values > FLAT * values[:, -1:], 1.0 / np.maximum(values, 1e-300), 0.0)
-    return d_qq - d_qz @ (vectors * inverse[:, None, :]) @ vectors.transpose(0, 2, 1) @ d_qz.transpose(0, 2, 1)
+    # with no change of distance, a direction of D_zz with no curvature, which no slide follows
+    # (D_zz is then of rank one, λvvᵀ with λ its trace, and its pseudo-inverse D_zz/λ²).
+    p, q, r = d_zz[:, 0, 0], d_zz[:, 0, 1], d_zz[:, 1, 1]
+    trace, det = p + r, p * r - q * q
+    full = det > FLAT * trace**2
+    inverse = np.empty_like(d_zz)
+    inverse[:, 0, 0], inverse[:, 1, 1] = np.where(full, r, p), np.where(full, p, r)
+    inverse[:, 0, 1] = inverse[:, 1, 0] = np.where(full, -q, q)
+    inverse /= np.where(full, det, trace**2)[:, None, None]
+    return d_tt - d_tz @ inverse @ d_tz.transpose(0, 2, 1)

@@ -494,9 +494,9 @@ def test_a_step_that_moves_the_cells_far_searches_each_configuration_alone():
 
 def test_a_second_order_step_meets_the_overlap_tolerance_in_fewer_linearizations():
     """PositionSettings.second_order: the contacts' curvature in each linearization, updates
-    taken whole. On a grown 2D colony its step ends within the overlap tolerance, in no more
-    linearizations than the first-order step (on grown colonies of 5,000 cells about half:
-    docs/model-notes.md); it needs a solver that takes the curvature."""
+    taken whole, and a last first-order one. On a grown 2D colony its step ends within the overlap
+    tolerance, in about as many linearizations as the first-order step (on grown colonies of
+    5,000 cells a quarter fewer: docs/model-notes.md); it needs a solver that takes the curvature."""
     from qpcontact.simulation import Settings, run_colony
     from qpcontact.simulation.steps import step_function
 
@@ -507,7 +507,7 @@ def test_a_second_order_step_meets_the_overlap_tolerance_in_fewer_linearizations
     second = step_function(settings.updated({"position_second_order": True}, "test"), {})(colony, dt)
     assert first.result.converged and second.result.converged and second.rejected == 0
     assert second.result.max_overlap <= settings.position.overlap_tolerance
-    assert second.result.iterations <= first.result.iterations
+    assert second.result.iterations <= first.result.iterations + 1  # its last, first order, included
     assert not np.array_equal(second.colony.cells.centers, first.colony.cells.centers)
     with pytest.raises(InvalidArgumentError, match="second_order"):
         position_step(colony.cells, dt, planar=True, settings=PositionSettings(second_order=True, solver="mprgp"))
