@@ -29,6 +29,7 @@ Registered as ``"ipm-petsc"`` when petsc4py and mpi4py can be imported
 
 from __future__ import annotations
 
+import ctypes
 import importlib.util
 import time
 from collections.abc import Callable, Mapping
@@ -52,14 +53,47 @@ def installed() -> bool:
 INSTALL_HINT = "needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distributed.md)"
 
 
+#: Debian's MUMPS built with PT-Scotch (``libmumps-ptscotch-5.5``, which ``scripts/install-mpi``
+#: installs), loaded ahead of the MUMPS PETSc links to (the same functions, the same version), so
+#: that MUMPS's analysis, its fill-reducing ordering, can run on every process
+#: (``PETSC_OPTIONS="-mat_mumps_icntl_28 2 -mat_mumps_icntl_29 1"``; Debian's plain MUMPS has
+#: neither PT-Scotch nor ParMETIS and refuses it, INFOG(1) = −38). Not asked for by default: on 2
+#: processes PT-Scotch's ordering made 12 % more flops than the sequential AMF, and the step 5 %
+#: slower (docs/distributed.md).
+PTSCOTCH_MUMPS = ("libptscotch-7.0.so", "libptscotcherr-7.0.so", "libmumps_common_ptscotch-5.5.so",
+                  "libpord_ptscotch-5.5.so", "libdmumps_ptscotch-5.5.so")
+_STATE: dict[str, Any] = {}
+
+
+def _load_parallel_analysis() -> bool:
+    """Load :data:`PTSCOTCH_MUMPS` into the global scope, before PETSc is loaded, where installed;
+    whether it was."""
+    try:
+        for name in PTSCOTCH_MUMPS:
+            ctypes.CDLL(name, mode=ctypes.RTLD_GLOBAL)
+    except OSError:
+        return False
+    return True
+
+
+def parallel_analysis() -> bool:
+    """Whether MUMPS's analysis can run on every process (:data:`PTSCOTCH_MUMPS` is installed:
+    PETSc's option ``-mat_mumps_icntl_28 2`` then works)."""
+    petsc()
+    return bool(_STATE["parallel_analysis"])
+
+
 def petsc() -> Any:
-    """petsc4py's ``PETSc`` module (MPI initialized on first use).
+    """petsc4py's ``PETSc`` module (MPI initialized on first use; MUMPS with PT-Scotch loaded
+    first where installed: :data:`PTSCOTCH_MUMPS`).
 
     Raises:
         NotInstalledError: petsc4py or mpi4py is missing (naming what to install).
     """
     if not installed():
         raise NotInstalledError(f"the distributed stack {INSTALL_HINT}")
+    if "parallel_analysis" not in _STATE:
+        _STATE["parallel_analysis"] = _load_parallel_analysis()
     from petsc4py import PETSc
 
     return PETSc
@@ -88,7 +122,7 @@ COUNTERS: dict[str, float] = {}
 def reset_counters() -> None:
     """Set :data:`COUNTERS` to zero."""
     COUNTERS.update(factor_cpu=0.0, factor_flops=0.0, factor_entries=0.0, factor_memory_mb=0.0, products=0.0,
-                    halo_bytes=0.0, gathered_bytes=0.0)
+                    halo_bytes=0.0, gathered_bytes=0.0, parallel_analysis=0.0)
 
 
 reset_counters()
@@ -224,14 +258,17 @@ class DistributedGram:
             options.setValue("mat_mumps_icntl_14", WORKSPACE_PERCENT)
         self._x, self._b = self._diagonal.duplicate(), self._diagonal.duplicate()
 
-    def factor(self, w: np.ndarray, d: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    def factor(self, w: np.ndarray, d: np.ndarray, extra: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
         """Factorize for these weights (this process's rows of ``w``, columns of ``d``); returns
-        the solve on this process's part.
+        the solve on this process's part. ``extra`` (an objective's curvature) must be None: a
+        distributed step is first order.
 
         Raises:
             ArithmeticError: MUMPS found the matrix numerically singular.
             SolverFailedError: MUMPS failed otherwise (its error code and what may help).
         """
+        if extra is not None:
+            raise InvalidArgumentError("curvature: the distributed interior point takes none (a first-order step)")
         PETSc = petsc()
         self._B.copy(self._scaled, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self._weights.array[:] = np.sqrt(w)
@@ -253,6 +290,7 @@ class DistributedGram:
             entries = float(factor.getMumpsInfo(9))  # negative: millions
             COUNTERS["factor_entries"] = entries if entries >= 0 else -1e6 * entries
             COUNTERS["factor_memory_mb"] = max(COUNTERS["factor_memory_mb"], float(factor.getMumpsInfo(16)))
+            COUNTERS["parallel_analysis"] = float(factor.getMumpsInfog(32) == 2)  # 1: on every process
         if status == -10:  # numerically singular: the interior point regularizes more
             raise ArithmeticError("MUMPS: the matrix is numerically singular (INFOG(1) = -10)")
         if status < 0:

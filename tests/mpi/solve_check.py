@@ -37,3 +37,10 @@ for problem in problems[-3:]:
         difference = float(np.max(np.abs(one.y - split.y))) / max(1.0, float(np.max(np.abs(one.y))))
         if comm.Get_rank() == 0:
             print(f"checked {size} {how} {split.status} {difference:.3g}", flush=True)
+
+# Where MUMPS with PT-Scotch is installed (scripts/install-mpi installs it), its analysis ran on
+# every process (INFOG(32) = 2).
+from qpcontact.solvers.petsc import COUNTERS, parallel_analysis  # noqa: E402
+
+if comm.Get_rank() == 0:
+    print(f"analysis loaded {int(parallel_analysis())} parallel {int(COUNTERS['parallel_analysis'])}", flush=True)

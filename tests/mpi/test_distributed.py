@@ -176,15 +176,24 @@ def test_what_two_processes_cannot_do_is_refused_before_the_run(tmp_path, flags,
 def test_the_distributed_interior_point_gives_the_answer_of_one_process(tmp_path, processes):
     """The QPs of grown colonies' steps, with bounds, solved on two and four processes (METIS's
     partition, and slabs of owners given by the caller): the same answer as ipm's in one process
-    (each process holds the whole answer)."""
+    (each process holds the whole answer), with MUMPS's analysis on every process (two) or on one
+    (four)."""
+    # On two processes MUMPS is asked for its analysis on every process (PT-Scotch's ordering).
+    parallel = {"PETSC_OPTIONS": "-mat_mumps_icntl_28 2 -mat_mumps_icntl_29 1"} if processes == 2 else {}
     done = subprocess.run(["mpiexec", "-n", str(processes), sys.executable, str(HERE / "solve_check.py")],
-                          capture_output=True, text=True, env=environment(), timeout=600)
+                          capture_output=True, text=True, env={**environment(), **parallel}, timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     lines = [line.split() for line in done.stdout.splitlines() if line.startswith("checked")]
     assert len(lines) >= 6
     for _, count, _how, status, difference in lines:
         assert count == str(processes) and status == "converged" and float(difference) < 1e-6
     assert {line[2] for line in lines} == {"metis", "owners"}
+    # Asked for, MUMPS's analysis ran on every process where its PT-Scotch build is installed (CI
+    # installs it; elsewhere MUMPS refuses it, and the solves above fail); by default on one.
+    analysis = [line.split() for line in done.stdout.splitlines() if line.startswith("analysis")]
+    assert analysis and analysis[0][4] == ("1" if parallel else "0")
+    if os.environ.get("QPCONTACT_REQUIRE_MPI") == "1":
+        assert analysis[0][2] == "1"
 
 
 def test_a_users_own_loop_runs_over_two_processes(tmp_path):
