@@ -130,10 +130,10 @@ class PositionSettings:
         help="each linearization also holds the contacts' curvature, weighted by the impulses of the last one (the "
              "Hessian of the Lagrangian: a contact point sliding along a turning rod, a turn's arc), its update taken "
              "whole, and the step ends with one first-order linearization; none: on where the solver takes it (ipm) "
-             "at a tolerance of 10⁻⁴ or looser. Off by default: on a grown 2D colony of 5,000 cells it takes a "
-             "quarter fewer linearizations and a tenth less time, but its colony's nematic length is 1.12 times and its "
-             "edge alignment 0.07 from the converged colony's, against the first-order step's 1.016 times and 0.02 "
-             "(docs/model-notes.md, \"A second-order step\")")
+             "at a tolerance of 10⁻⁴ or looser. Off by default: growing a 2D colony to 10⁴ cells it takes a fifth "
+             "fewer linearizations but 1.07 times the time (its curvature costs), and at 5,000 cells its colony's "
+             "nematic length is 1.12 times and its edge alignment 0.07 from the converged colony's, against the "
+             "first-order step's 1.016 times and 0.02 (docs/model-notes.md, \"A second-order step\")")
     allow_shrinking: bool = setting(
         False, unit="", help="contacts may shorten a cell (off: they can stop its growth but not reverse it)")
     solver: str = setting(
