@@ -10,7 +10,8 @@ From the runs of one state on P = 1, 2, 4, 8 MPI processes (``ipm-petsc``), per 
   ``d`` what is divided; both scaled linearly with the cells;
 - the factorization's CPU seconds, largest per process, fitted as ``s + q/P``: ``s`` what does not
   divide (MUMPS's analysis, its ordering on one process; the top fronts' imbalance), scaled
-  linearly, ``q`` what divides, scaled as MUMPS's flops of a 2D nested dissection, ``N^1.5``;
+  linearly, ``q`` what divides, scaled as MUMPS's flops of a nested dissection: ``N^1.5`` in 2D,
+  ``N^2`` in 3D (``--flops-exponent``; the default from the state's name);
 - the bytes each process sends a step (measured at the largest P), summed over the processes:
   every process receives about that much (the collectives are gathers to all), scaled linearly,
   over the link's bandwidth;
@@ -51,6 +52,9 @@ def main(argv: list[str] | None = None) -> None:
                         help="the link's bandwidth per process [bytes/s] (default: 25·10⁹, InfiniBand HDR's 200 Gb/s)")
     parser.add_argument("--steps-per-efold", type=float, default=38.5,
                         help="steps a colony takes to grow by e (default: 38.5, measured on the 2D run to 1.6·10⁴)")
+    parser.add_argument("--flops-exponent", type=float, default=None,
+                        help="how the factorization's flops grow with the cells (default: 1.5 for a 2d state, 2 for 3d: "
+                             "nested dissection's)")
     parser.add_argument("--out", type=Path, default=None, help="also write the table here")
     args = parser.parse_args(argv)
     data = json.loads(args.measured.read_text())["per_process"]
@@ -69,22 +73,24 @@ def main(argv: list[str] | None = None) -> None:
     linearizations = float(np.median(widest["linearizations"]))
     n0 = float(widest["cells"][0]) if "cells" in widest else float(args.state.split("-")[-1])
     scale = args.cells / n0
+    exponent = args.flops_exponent if args.flops_exponent is not None else (2.0 if args.state.startswith("3d") else 1.5)
     lines = [f"Model of {args.cells:.3g} cells from {args.state} ({n0:,.0f} cells) on P = {', '.join(f'{x:g}' for x in p)}: "
              f"other than factorization {r:.3f} + {d:.3f}/P s, factorization {s:.3f} + {q:.3f}/P s (largest per "
              f"process); {sent_total / 1e6:.1f} MB sent a step (all processes, P = {p[-1]:g}); {iterations:g} IPM "
              f"iterations, {linearizations:g} linearizations a step; link {args.latency * 1e6:g} µs, "
-             f"{args.bandwidth / 1e9:g} GB/s.\n",
+             f"{args.bandwidth / 1e9:g} GB/s; factorization flops ∝ N^{exponent:g}; {args.steps_per_efold:g} steps to "
+             f"grow by e.\n",
              "| P | repeated [s] | divided [s] | factorization, not divided [s] | factorization, divided [s] | "
              "traffic [s] | latency [s] | one step [s] | one cell to N [h] |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     g = 1.0 / args.steps_per_efold  # growth of ln N a step
     for processes in (float(x) for x in args.processes.split(",")):
-        parts = [r * scale, d * scale / processes, s * scale, q * scale ** 1.5 / processes,
+        parts = [r * scale, d * scale / processes, s * scale, q * scale ** exponent / processes,
                  sent_total * scale / args.bandwidth,
                  (iterations * 30 + linearizations * 20) * math.log2(processes) * args.latency]
         step = sum(parts)
         # Σ over the steps of N_k^α, N_k growing by e^g a step to N: N^α / (1 − e^{−αg}).
         linear = (parts[0] + parts[1] + parts[2] + parts[4]) / (1 - math.exp(-g))
-        grow = linear + parts[3] / (1 - math.exp(-1.5 * g)) + parts[5] * math.log(args.cells) / g
+        grow = linear + parts[3] / (1 - math.exp(-exponent * g)) + parts[5] * math.log(args.cells) / g
         lines.append(f"| {processes:g} | " + " | ".join(f"{x:.2f}" for x in parts) + f" | {step:.1f} | {grow / 3600:.2f} |")
     text = "\n".join(lines) + "\n"
     print(text)
