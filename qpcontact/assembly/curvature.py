@@ -73,7 +73,6 @@ def curvature_rows(system: ContactSystem, cells: Cells, contact_impulses: np.nda
     columns = np.concatenate([column_of[contacts.cell_a][:, slots], column_of[cell_b][:, slots]], axis=1)
     directions = np.vstack([_column_directions(system, turned, dt), np.zeros((1, 7))])
     moves = directions[columns]  # (P, 2S, 7); an absent column (-1) takes the zero row
-    moves[columns < 0] = 0.0
     m = slots.size
     to_coordinates = np.zeros((pushing.size, 14, 2 * m))
     to_coordinates[:, 0:7, :m] = moves[:, :m].transpose(0, 2, 1)
@@ -82,8 +81,7 @@ def curvature_rows(system: ContactSystem, cells: Cells, contact_impulses: np.nda
     weight = system.from_contact_impulses(contact_impulses[pushing]) / (dt * system.velocity_scale)
     concave = -weight[:, None, None] * separation_hessians(cells, contacts, to_coordinates)
     values, vectors = np.linalg.eigh(concave)  # (P, 2S), (P, 2S, 2S): eigenvectors in columns
-    keep = values > SMALLEST_EIGENVALUE * np.maximum(values[:, -1:], 0.0)
-    keep &= values > 0
+    keep = (values > 0) & (values > SMALLEST_EIGENVALUE * values[:, -1:])
     entries = vectors * np.sqrt(np.where(keep, values, 0.0))[:, None, :]  # (P, column i, eigen e)
     contact, column, eigen = np.nonzero(keep[:, None, :] & (columns >= 0)[:, :, None]
                                         & (entries != 0.0))

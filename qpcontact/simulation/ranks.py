@@ -65,7 +65,8 @@ def distributed_settings(settings: Settings, comm: Any) -> tuple[Settings, str]:
 
     Raises:
         InvalidArgumentError: a velocity-level run, another solver (each process would solve
-            the whole problem), or a solver tolerance below what ``ipm-petsc`` reaches.
+            the whole problem), a solver tolerance below what ``ipm-petsc`` reaches, or a
+            second-order step.
     """
     size = comm.Get_size()
     if settings.run.step != "position":
@@ -76,6 +77,9 @@ def distributed_settings(settings: Settings, comm: Any) -> tuple[Settings, str]:
         raise InvalidArgumentError(f"a run on {size} MPI processes solves to --position-tolerance {UNKNOWNS_ACCURACY:g} "
                                    f"or looser ({DISTRIBUTED_SOLVER} works in the unknowns only); got "
                                    f"{settings.position.tolerance:g}")
+    if settings.position.second_order:
+        raise InvalidArgumentError(f"a run on {size} MPI processes takes first-order linearizations "
+                                   f"({DISTRIBUTED_SOLVER} takes no curvature); got --position-second-order true")
     if solver == DISTRIBUTED_SOLVER:
         return settings, ""
     if solver != "ipm":

@@ -58,7 +58,7 @@ from ..geometry.surfaces import Plane, substrate
 from ..io.runs import read_toml
 from ..schema import Layer, Setting, check_fields, documented, setting, settings_of, table
 from ..solvers import get_solver
-from ..timestep.position import PositionSettings, search_margin
+from ..timestep.position import PositionSettings, search_margin, uses_second_order
 from ..timestep.step import VelocitySettings
 
 __all__ = ["COLORS", "FORMER_NAMES", "ModelSettings", "OutputSettings", "RunSettings", "Settings", "VelocitySettings",
@@ -306,14 +306,16 @@ class Settings:
         ``"position step, ipm at tolerance 0.001, overlap ≤ 0.01"``, and the search margin when
         the scene picked it (``margin = none``: ``", search margin 0.75 (by the scene)"``); a cap
         on turning or an aim gap, which change the colony (docs/model-notes.md), when set
-        (``", turns capped at 0.2 diameters, aim 0.03"``)."""
+        (``", turns capped at 0.2 diameters, aim 0.03"``); a second-order step says so
+        (``", second order"``)."""
         if self.run.step == "position":
             p = self.position
             chosen = "" if p.margin is not None else \
                 f", search margin {search_margin(p, self.run.dimensions == 2):g} (by the scene)"
             if self.run.growth_per_step is None and self.time_step_rule() == "growth":
                 chosen += f", growth per step {self.growth_per_step():g} (by the scene)"
-            bending = "" if p.turn_limit is None else f", turns capped at {p.turn_limit:g} diameters"
+            bending = ", second order" if uses_second_order(p) else ""
+            bending += "" if p.turn_limit is None else f", turns capped at {p.turn_limit:g} diameters"
             if p.aim != PositionSettings().aim:
                 bending += f", aim {p.aim:g}"
             return (f"position step, {p.solver} at tolerance {p.tolerance:g}, overlap ≤ {p.overlap_tolerance:g}"

@@ -59,7 +59,7 @@ import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError
 from .cholesky import GramMatrix, quiet_numpy
-from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
+from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, objective_gradient, register
 
 #: Default cap on interior-point iterations.
 MAX_ITERATIONS = 100
@@ -133,11 +133,8 @@ class _Rows:
     curvature_values: np.ndarray | None = None  # RᵀR in the normal matrix's stored order
 
     def gradient(self, y: np.ndarray) -> np.ndarray:
-        """The objective's gradient ``ỹ + RᵀR(ỹ − ỹ₀)``."""
-        if self.curvature is None:
-            return y
-        assert self.anchor is not None
-        return y + self.curvature.T @ (self.curvature @ (y - self.anchor))
+        """The objective's gradient at ``ỹ`` (:func:`~qpcontact.solvers.registry.objective_gradient`)."""
+        return objective_gradient(y, self.curvature, self.anchor)
 
 
     @property
@@ -540,7 +537,10 @@ def _gram_matrix(matrix: sp.csr_matrix) -> GramMatrix:
 
 def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, time_limit: float | None,
            settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
-    curvature = None if problem.curvature is None or problem.anchor is None else (problem.curvature, problem.anchor)
+    curvature = None
+    if problem.curvature is not None:
+        assert problem.anchor is not None  # solve() refuses one without the other
+        curvature = (problem.curvature, problem.anchor)
     out = interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
                          time_limit=time_limit, max_iterations=settings.get("max_iterations"), curvature=curvature)
     return out.output()

@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
+import itertools
+import os
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -54,20 +56,28 @@ INSTALL_HINT = "needs petsc4py and mpi4py: scripts/install-mpi VENV (docs/distri
 
 
 #: Debian's MUMPS built with PT-Scotch (``libmumps-ptscotch-5.5``, which ``scripts/install-mpi``
-#: installs), loaded ahead of the MUMPS PETSc links to (the same functions, the same version), so
-#: that MUMPS's analysis, its fill-reducing ordering, can run on every process
-#: (``PETSC_OPTIONS="-mat_mumps_icntl_28 2 -mat_mumps_icntl_29 1"``; Debian's plain MUMPS has
-#: neither PT-Scotch nor ParMETIS and refuses it, INFOG(1) = −38). Not asked for by default: on 2
-#: processes PT-Scotch's ordering made 12 % more flops than the sequential AMF, and the step 5 %
-#: slower (docs/distributed.md).
+#: installs): where ``PETSC_OPTIONS`` asks for MUMPS's analysis on every process
+#: (``-mat_mumps_icntl_28 2``, with ``-mat_mumps_icntl_29 1`` for PT-Scotch), it is loaded ahead of
+#: the MUMPS PETSc links to (the same functions, the same version), since Debian's plain MUMPS has
+#: neither PT-Scotch nor ParMETIS and refuses it (INFOG(1) = −38). Otherwise PETSc's own MUMPS
+#: runs, untouched. Not asked for by default: on 2 processes PT-Scotch's ordering made 12 % more
+#: flops than the sequential AMF, and the step 5 % slower (docs/distributed.md).
 PTSCOTCH_MUMPS = ("libptscotch-7.0.so", "libptscotcherr-7.0.so", "libmumps_common_ptscotch-5.5.so",
                   "libpord_ptscotch-5.5.so", "libdmumps_ptscotch-5.5.so")
 _STATE: dict[str, Any] = {}
 
 
+def _asks_parallel_analysis() -> bool:
+    """``PETSC_OPTIONS`` sets ``-mat_mumps_icntl_28 2`` (MUMPS's analysis on every process)."""
+    words = os.environ.get("PETSC_OPTIONS", "").split()
+    return any(word == "-mat_mumps_icntl_28" and value == "2" for word, value in itertools.pairwise(words))
+
+
 def _load_parallel_analysis() -> bool:
-    """Load :data:`PTSCOTCH_MUMPS` into the global scope, before PETSc is loaded, where installed;
-    whether it was."""
+    """Load :data:`PTSCOTCH_MUMPS` into the global scope, before PETSc is loaded, where asked for
+    (:func:`_asks_parallel_analysis`) and installed; whether it was."""
+    if not _asks_parallel_analysis():
+        return False
     try:
         for name in PTSCOTCH_MUMPS:
             ctypes.CDLL(name, mode=ctypes.RTLD_GLOBAL)
@@ -77,15 +87,15 @@ def _load_parallel_analysis() -> bool:
 
 
 def parallel_analysis() -> bool:
-    """Whether MUMPS's analysis can run on every process (:data:`PTSCOTCH_MUMPS` is installed:
-    PETSc's option ``-mat_mumps_icntl_28 2`` then works)."""
+    """Whether the MUMPS with PT-Scotch was loaded (:data:`PTSCOTCH_MUMPS`: asked for, and
+    installed), so that PETSc's option ``-mat_mumps_icntl_28 2`` works."""
     petsc()
     return bool(_STATE["parallel_analysis"])
 
 
 def petsc() -> Any:
     """petsc4py's ``PETSc`` module (MPI initialized on first use; MUMPS with PT-Scotch loaded
-    first where installed: :data:`PTSCOTCH_MUMPS`).
+    first where asked for and installed: :data:`PTSCOTCH_MUMPS`).
 
     Raises:
         NotInstalledError: petsc4py or mpi4py is missing (naming what to install).
@@ -296,7 +306,8 @@ class DistributedGram:
         if status < 0:
             hint = " (workspace too small: PETSC_OPTIONS='-mat_mumps_icntl_14 100')" if status in (-8, -9) else ""
             if status == -38:
-                hint = " (a parallel analysis, ICNTL(28) = 2, that this MUMPS was built without ParMETIS/PT-SCOTCH for)"
+                hint = (" (a parallel analysis, ICNTL(28) = 2, that this MUMPS was built without ParMETIS/PT-SCOTCH "
+                        "for; on Debian: apt-get install libmumps-ptscotch-5.5, which scripts/install-mpi installs)")
             raise SolverFailedError(f"MUMPS failed with INFOG(1) = {status}{hint}; its user guide lists the codes")
 
         def solve(v: np.ndarray) -> np.ndarray:

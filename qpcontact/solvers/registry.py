@@ -54,6 +54,15 @@ QP_FORMS = ("primal", "contact")
 DEFAULT_FORM = {"complementarity": "contact", "least_squares": "primal", "linear": "contact"}
 
 
+def objective_gradient(y: np.ndarray, curvature: sp.spmatrix | None, anchor: np.ndarray | None) -> np.ndarray:
+    """The gradient at ``ỹ`` of ``½‖ỹ‖² + ½‖R(ỹ − ỹ₀)‖²``: ``ỹ + RᵀR(ỹ − ỹ₀)`` (``ỹ`` without a
+    curvature ``R``)."""
+    if curvature is None:
+        return y
+    assert anchor is not None
+    return y + curvature.T @ (curvature @ (y - anchor))
+
+
 @dataclass(frozen=True)
 class Problem:
     """``B̃ ỹ ≥ b̃`` in scaled units: a whole system or one independent block of it.
@@ -85,11 +94,8 @@ class Problem:
     anchor: np.ndarray | None = None
 
     def gradient(self, y: np.ndarray) -> np.ndarray:
-        """The objective's gradient at ``ỹ``: ``ỹ + RᵀR(ỹ − ỹ₀)`` (``ỹ`` without curvature)."""
-        if self.curvature is None:
-            return y
-        assert self.anchor is not None
-        return y + self.curvature.T @ (self.curvature @ (y - self.anchor))
+        """The objective's gradient at ``ỹ`` (:func:`objective_gradient`)."""
+        return objective_gradient(y, self.curvature, self.anchor)
 
     @property
     def bounded(self) -> bool:
@@ -414,6 +420,8 @@ def solve(
     if problem.bounded and form not in spec.bounds:
         where = f"in {_words(spec.bounds)} form only" if spec.bounds else "none"
         raise InvalidArgumentError(f"bounds: solver {solver!r} takes bounds on ỹ {where} (form {form!r})")
+    if (problem.curvature is None) != (problem.anchor is None):
+        raise InvalidArgumentError("curvature, anchor: give both (the objective's R and ỹ₀) or neither")
     if problem.curvature is not None and not spec.curvature:
         raise InvalidArgumentError(f"curvature: solver {solver!r} takes no curvature of the objective (ipm does)")
     if spec.blockwise:

@@ -83,6 +83,11 @@ from .tracking import Floors, Tracked, diameters, evaluate, first_pairs, start_f
 __all__ = ["CellMotion", "ContactImpulses", "PositionSettings", "PositionStepResult", "move", "position_step",
            "uses_second_order"]
 
+#: The tightest tolerance a second-order step's solves reach (:data:`UNKNOWNS_ACCURACY`/10: the
+#: interior point's Newton systems in the unknowns, the only ones that take the curvature, lose
+#: tighter answers to rounding).
+SECOND_ORDER_TIGHTEST = 0.1 * UNKNOWNS_ACCURACY
+
 
 @documented
 @dataclass(frozen=True)
@@ -150,6 +155,13 @@ class PositionSettings:
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.second_order:  # what a second-order step needs, refused before any run starts
+            if not get_solver(self.solver).curvature:
+                raise InvalidArgumentError(f"second_order: solver {self.solver!r} takes no curvature of the objective "
+                                           "(use solver='ipm', or second_order=None or False)")
+            if self.tolerance < SECOND_ORDER_TIGHTEST:
+                raise InvalidArgumentError(f"second_order: its solves reach a tolerance of {SECOND_ORDER_TIGHTEST:g} "
+                                           f"at best; got tolerance {self.tolerance:g}")
 
     @property
     def bounded(self) -> bool:
@@ -314,12 +326,6 @@ def uses_second_order(settings: PositionSettings, comm: Any = None) -> bool:
     return get_solver(settings.solver).curvature and comm is None and settings.tolerance >= UNKNOWNS_ACCURACY
 
 
-#: The tightest tolerance a second-order step's solves reach (:data:`UNKNOWNS_ACCURACY`/10: the
-#: interior point's Newton systems in the unknowns, the only ones that take the curvature, lose
-#: tighter answers to rounding).
-SECOND_ORDER_TIGHTEST = 0.1 * UNKNOWNS_ACCURACY
-
-
 def search_margin(settings: PositionSettings, planar: bool) -> float:
     """The reach of the contact search [diameters]: the setting, or its default for the scene
     (``margin = None``: 0.75 in a monolayer, 0.5 in 3D)."""
@@ -345,9 +351,6 @@ def _checked(cells: Cells, dt: float, drive: np.ndarray | None, planes: Sequence
         raise InvalidArgumentError(f"solver {settings.solver!r} takes no bounds on the unknowns; the position step "
                                    "bounds turning and shrinking (use solver='ipm', or turn_limit=None, trust=None "
                                    "and allow_shrinking=True)")
-    if settings.second_order and not spec.curvature:
-        raise InvalidArgumentError(f"second_order: solver {settings.solver!r} takes no curvature of the objective "
-                                   "(use solver='ipm', or second_order=None or False)")
     planes = list(planes)
     for plane in planes:
         if not isinstance(plane, Plane):
@@ -432,7 +435,6 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np
     progress.impulses = progress.impulses + progress.relaxation * (system.to_impulses(out.y) - progress.impulses)
     _adapt_trust(progress, progress.previous, trusting, settings)
     return ""
-
 
 
 def _result(progress: _Progress, cells: Cells, end: Cells, contacts: Contacts, diameter: np.ndarray,

@@ -165,7 +165,8 @@ def test_a_run_saved_on_four_processes_continues_on_two_and_on_one(grown, tmp_pa
 
 
 @pytest.mark.parametrize(("flags", "message"), [(("--position-solver", "clarabel"), "every process"),
-                                                (("--step", "velocity"), "--step position")])
+                                                (("--step", "velocity"), "--step position"),
+                                                (("--position-second-order", "true"), "first-order linearizations")])
 def test_what_two_processes_cannot_do_is_refused_before_the_run(tmp_path, flags, message):
     done = simulate("--cells", "20", "--out", str(tmp_path / "run"), *flags, processes=2, check=False)
     assert done.returncode == 2 and message in done.stderr
@@ -188,12 +189,11 @@ def test_the_distributed_interior_point_gives_the_answer_of_one_process(tmp_path
     for _, count, _how, status, difference in lines:
         assert count == str(processes) and status == "converged" and float(difference) < 1e-6
     assert {line[2] for line in lines} == {"metis", "owners"}
-    # Asked for, MUMPS's analysis ran on every process where its PT-Scotch build is installed (CI
-    # installs it; elsewhere MUMPS refuses it, and the solves above fail); by default on one.
+    # Asked for, the PT-Scotch MUMPS was loaded and MUMPS's analysis ran on every process (CI
+    # installs it; elsewhere MUMPS refuses it, and the solves above fail); by default neither:
+    # PETSc's own MUMPS, the analysis on one process.
     analysis = [line.split() for line in done.stdout.splitlines() if line.startswith("analysis")]
-    assert analysis and analysis[0][4] == ("1" if parallel else "0")
-    if os.environ.get("QPCONTACT_REQUIRE_MPI") == "1":
-        assert analysis[0][2] == "1"
+    assert analysis and analysis[0][2] == analysis[0][4] == ("1" if parallel else "0")
 
 
 def test_a_users_own_loop_runs_over_two_processes(tmp_path):

@@ -123,6 +123,11 @@ def test_the_api_reference_shows_the_one_description():
     (["--pressure-growth", "linear", "--stall-pressure", "0"], "argument --stall-pressure: expected a number > 0, got 0.0"),
     (["--pressure-growth", "linear", "--stall-pressure", "inf"], "argument --stall-pressure: expected a finite number"),
     (["--color", "red"], "argument --color: expected one of orientation, pressure, cell_type, got 'red'"),
+    # a second-order step needs a solver that takes the curvature, and reaches 10⁻⁵ at best
+    (["--position-second-order", "true", "--position-solver", "clarabel"],
+     "--position-second-order: solver 'clarabel' takes no curvature of the objective"),
+    (["--position-second-order", "true", "--position-tolerance", "1e-6"],
+     "its solves reach a tolerance of 1e-05 at best; got tolerance 1e-06"),
 ])
 def test_a_flag_that_does_not_apply_or_cannot_be_used_is_refused_before_the_run(argv, message, tmp_path, capsys,
                                                                                 monkeypatch):
@@ -349,6 +354,12 @@ def test_the_step_in_words_names_the_search_margin_and_the_step_the_scene_picked
     assert "capped" not in Settings().describe_step() and "aim" not in Settings().describe_step()
     bent = Settings().updated({"position_turn_limit": 0.2, "position_aim": 0.03}).describe_step()
     assert ", turns capped at 0.2 diameters, aim 0.03" in bent
+    # and what ran: a second-order step, given or chosen by its solver (none), says so
+    assert "second order" not in Settings().describe_step()
+    assert "second order" in Settings().updated({"position_second_order": True}).describe_step()
+    assert "second order" in Settings().updated({"position_second_order": None}).describe_step()
+    assert "second order" not in Settings().updated({"position_second_order": None,
+                                                     "position_solver": "clarabel"}).describe_step()
 
 
 def test_the_growth_step_is_the_scenes_unless_given():

@@ -175,3 +175,24 @@ def test_the_objective_s_curvature_gives_the_qp_s_own_answer():
     assert np.abs(solve(problem, "ipm", tolerance=1e-8).y - expected).max() < 1e-6
     with pytest.raises(InvalidArgumentError, match="curvature"):
         solve(problem, "mprgp", tolerance=1e-8)
+
+
+def test_a_curvature_is_split_with_its_blocks(monkeypatch):
+    """Problem.block keeps each block's curvature rows and anchor: two independent problems
+    solved blockwise give the answer of the whole one."""
+    from qpcontact.solvers import Problem, blocks, solve
+
+    monkeypatch.setattr(blocks, "BLOCK_ROWS", 1)  # each component its own block
+
+    rng = np.random.default_rng(4)
+    parts = [sp.random(20, 12, density=0.3, random_state=s, format="csr") + sp.eye(20, 12, format="csr")
+             for s in (5, 6)]
+    B = sp.block_diag(parts, format="csr")
+    R = sp.block_diag([sp.random(6, 12, density=0.3, random_state=s) for s in (7, 8)], format="csr")
+    problem = Problem(B, rng.standard_normal(40), curvature=R, anchor=rng.standard_normal(24))
+    whole = solve(problem, "ipm", tolerance=1e-9, split=False)
+    blockwise = solve(problem, "ipm", tolerance=1e-9)
+    assert blockwise.extras["blocks"] == 2 and blockwise.found and whole.found
+    assert np.abs(blockwise.y - whole.y).max() < 1e-6
+    with pytest.raises(InvalidArgumentError, match="both"):
+        solve(Problem(B, problem.rhs, curvature=R), "ipm")
