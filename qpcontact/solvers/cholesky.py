@@ -119,12 +119,13 @@ def _nested_dissection(matrix: sp.csr_matrix) -> np.ndarray | None:
     return np.lexsort((np.arange(n), rank[group])).astype(np.int64)
 
 
-def _row_pairs(indptr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _row_pairs(indptr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs ``(i ≥ j)`` of stored entries of each row of a CSR matrix: ``(first, second,
-    row)``, positions in its data. Generated for all rows with the same number of entries at once
-    (a few distinct counts: a loop over counts, not over rows)."""
+    row, pair)``, positions in its data, and each pair's place among its row's pairs (the order of
+    ``np.tril_indices``, the same in every row with as many entries). Generated for all rows with
+    the same number of entries at once (a few distinct counts: a loop over counts, not over rows)."""
     counts = np.diff(indptr)
-    firsts, seconds, rows = [], [], []
+    firsts, seconds, rows, pairs = [], [], [], []
     for m in np.unique(counts[counts > 0]):
         of = np.flatnonzero(counts == m)
         i, j = np.tril_indices(int(m))
@@ -132,10 +133,57 @@ def _row_pairs(indptr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         firsts.append((start + i).ravel())
         seconds.append((start + j).ravel())
         rows.append(np.repeat(of, i.size))
+        pairs.append(np.tile(np.arange(i.size), of.size))
     if not firsts:
         none = np.zeros(0, dtype=np.int64)
-        return none, none.copy(), none.copy()
-    return np.concatenate(firsts), np.concatenate(seconds), np.concatenate(rows)
+        return none, none.copy(), none.copy(), none.copy()
+    return np.concatenate(firsts), np.concatenate(seconds), np.concatenate(rows), np.concatenate(pairs)
+
+
+def _row_signatures(csr: sp.csr_matrix) -> np.ndarray:
+    """(K,) a number per row of ``csr`` that only rows with the same columns share (a sum of random
+    weights of its columns, fixed by the number of columns: two rows with different columns share
+    one with a probability of about 10⁻¹⁶)."""
+    weights = np.random.default_rng(csr.shape[1]).random(csr.shape[1]) + 1.0
+    return sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape) @ weights
+
+
+#: A matrix is grown from the last one of its family (:class:`GramMatrix`, ``grown_from``) only when
+#: at most this fraction of its rows have columns no row of the last one had; else it is built anew.
+GROWN_NEW_ROWS = 0.1
+
+
+def _grown(old: GramMatrix, csr: sp.csr_matrix, signatures: np.ndarray, first: np.ndarray, second: np.ndarray,
+           row: np.ndarray, pair: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The pattern's keys and each product's entry for ``csr`` grown from the matrix of ``old``
+    (:class:`GramMatrix`, ``grown_from``; ``signatures``: :func:`_row_signatures` of ``csr``;
+    ``first, second, row, pair``: :func:`_row_pairs`), or None where it cannot be (another number of columns,
+    more than :data:`GROWN_NEW_ROWS` of its rows with columns no row of ``old`` had).
+
+    A row with the columns of a row of ``old`` has its products at that row's entries; the
+    products of the other rows are looked up, and the entries they need that ``old`` lacks are
+    added to the pattern (old entries keep their order, shifted past the added ones)."""
+    n, counts = csr.shape[1], np.diff(csr.indptr)
+    if old.shape[0] != n:
+        return None
+    order = np.argsort(old._signatures, kind="stable")
+    at = np.minimum(np.searchsorted(old._signatures[order], signatures), max(order.size - 1, 0))
+    match = order[at] if order.size else np.zeros(signatures.size, dtype=np.int64)
+    found = (old._signatures[match] == signatures) & (old._counts[match] == counts) if order.size else \
+        np.zeros(signatures.size, dtype=bool)
+    if np.count_nonzero(~found) > GROWN_NEW_ROWS * max(signatures.size, 1):
+        return None
+    fresh = ~found[row]
+    fresh_keys = csr.indices[second[fresh]].astype(np.int64) * n + csr.indices[first[fresh]]
+    wanted = np.unique(fresh_keys)  # few (the new rows'): the old keys are sorted already
+    at = np.minimum(np.searchsorted(old._keys, wanted), old._keys.size - 1)
+    added = wanted[old._keys[at] != wanted]
+    keys = old._keys if added.size == 0 else np.insert(old._keys, np.searchsorted(old._keys, added), added)
+    position = np.empty(first.size, dtype=np.int64)
+    known = old._by_row[old._row_start[match[row[~fresh]]] + pair[~fresh]]
+    position[~fresh] = known if added.size == 0 else known + np.searchsorted(added, old._keys[known])
+    position[fresh] = np.searchsorted(keys, fresh_keys)
+    return keys, position
 
 
 class GramMatrix:
@@ -148,31 +196,54 @@ class GramMatrix:
     weighted ``np.bincount`` over the products took 10 ms a refill on a grown 2D colony of 5,000
     cells, the product 2 ms; 2026-12-04).
 
+    ``grown_from``: the matrix of the last problem of the same family (the linearizations of one
+    position step: the same unknowns, the contacts of the last and a few more): its ordering is
+    kept, and so are its entries and the place of each product of a row with the same columns, so
+    only the products of new rows are looked up and only the entries they add are inserted (a
+    new pattern costs a symbolic analysis, not a nested dissection and a search of every product:
+    0.1 s a linearization of a grown 2D colony of 5,000 cells, docs/performance.md). Built anew
+    where it cannot be grown (:func:`_grown`).
+
     Memory: about 16 bytes per product; a 2D colony has about 36 products per contact row, a 3D
     one about 78."""
 
-    def __init__(self, matrix: sp.spmatrix) -> None:
+    def __init__(self, matrix: sp.spmatrix, grown_from: GramMatrix | None = None) -> None:
         csr = sp.csr_matrix(matrix)
         csr.sum_duplicates()
         csr.sort_indices()
         k, n = csr.shape
-        first, second, row = _row_pairs(csr.indptr)
-        # The pattern (with the whole diagonal) in CSC order, lower triangle, from the structure,
-        # not the values: a product of stored zeros is dropped by scipy's matmul, and a refresh
-        # (:meth:`refresh`) may fill them (a planar step's Jacobian has zeros where the next
-        # step's has values).
-        structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
-        pattern = sp.tril(structure.T @ structure + sp.identity(n, format="csc"), format="csc")
-        pattern.sort_indices()
-        column_of_entry = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr))
-        keys = column_of_entry * n + pattern.indices
-        # Each product's entry by a binary search of its (column, row) key (columns sorted within
-        # a row of A: the first of a pair is the larger column, the row of the lower triangle).
-        position = np.searchsorted(keys, csr.indices[second].astype(np.int64) * n + csr.indices[first])
+        first, second, row, pair = _row_pairs(csr.indptr)
+        self._signatures, self._counts = _row_signatures(csr), np.diff(csr.indptr)
+        grown = None if grown_from is None else _grown(grown_from, csr, self._signatures, first, second, row, pair)
+        #: The ordering was computed for another matrix of the family (:meth:`refresh`).
+        self.inherited = grown is not None
+        if grown is None:
+            # The pattern (with the whole diagonal) in CSC order, lower triangle, from the structure,
+            # not the values: a product of stored zeros is dropped by scipy's matmul, and a refresh
+            # (:meth:`refresh`) may fill them (a planar step's Jacobian has zeros where the next
+            # step's has values).
+            structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
+            pattern = sp.tril(structure.T @ structure + sp.identity(n, format="csc"), format="csc")
+            pattern.sort_indices()
+            keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
+            # Each product's entry by a binary search of its (column, row) key (columns sorted
+            # within a row of A: the first of a pair is the larger column, the row of the lower
+            # triangle).
+            position = np.searchsorted(keys, csr.indices[second].astype(np.int64) * n + csr.indices[first])
+        else:
+            keys, position = grown
+        column_of_entry, row_of_entry = keys // n, keys % n
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(column_of_entry, minlength=n))])
         self.diagonal_position = np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
         self._keys = keys
         self.size = keys.size
         self.shape = (n, n)
+        # Each product's entry, by row of A and its place in the row: a matrix grown from this one
+        # finds the entries of its rows here.
+        pairs_per_row = self._counts * (self._counts + 1) // 2
+        self._row_start = np.concatenate([[0], np.cumsum(pairs_per_row)])
+        self._by_row = np.empty(position.size, dtype=np.int64)
+        self._by_row[self._row_start[row] + pair] = position
         # P: one row per entry, one column per row of A (each row of A adds to an entry at most
         # once: no duplicates). scipy's conversion from triplets is a counting sort; the place of
         # each product in it comes back as the data of a matrix built with the products' indices.
@@ -182,17 +253,23 @@ class GramMatrix:
         placed.data = (csr.data[first] * csr.data[second])[self._order]
         self._scatter = placed
         self._indptr, self._indices = csr.indptr.copy(), csr.indices.copy()
-        self._lower_pattern = (pattern.indptr, pattern.indices)
+        self._lower_pattern = (indptr, row_of_entry)
         self.backend = BACKEND
-        if self.backend == "pardiso":
-            # The lower triangle in CSC is the upper triangle in CSR, which PARDISO takes.
-            self._pattern = (pattern.indptr.astype(np.int32), pattern.indices.astype(np.int32))
-        else:
-            self._rows = cvxopt.matrix(pattern.indices.astype(np.int64), tc="i")
-            self._cols = cvxopt.matrix(column_of_entry, tc="i")
-            self._permutation = _nested_dissection(csr)
         self._matrix: Any = None
         self._symbolic: Any = None
+        same = grown_from is not None and grown is not None and np.array_equal(keys, grown_from._keys)
+        if same and grown_from is not None and grown_from.backend == self.backend:
+            # The same pattern: its matrix and analysis are this one's (the last is not used again).
+            self._matrix, self._symbolic = grown_from._matrix, grown_from._symbolic
+            grown_from._matrix = grown_from._symbolic = None
+        if self.backend == "pardiso":
+            # The lower triangle in CSC is the upper triangle in CSR, which PARDISO takes.
+            self._pattern = (indptr.astype(np.int32), row_of_entry.astype(np.int32))
+        else:
+            self._rows = cvxopt.matrix(row_of_entry, tc="i")
+            self._cols = cvxopt.matrix(column_of_entry, tc="i")
+            self._permutation = (getattr(grown_from, "_permutation", None) if grown is not None
+                                 else _nested_dissection(csr))
 
     def refresh(self, matrix: sp.spmatrix) -> bool:
         """Take the values of ``matrix`` if it has the pattern this was built for (then the

@@ -292,6 +292,7 @@ def interior_point(
     warm_shift: float = 1e-2,
     space: str = "auto",
     curvature: tuple[sp.spmatrix, np.ndarray] | None = None,
+    family: object | None = None,
 ) -> IterativeSolution:
     """Solve ``min ½‖ỹ‖² s.t. B̃ỹ ≥ b̃, l ≤ ỹ ≤ u`` (module docstring).
 
@@ -309,6 +310,8 @@ def interior_point(
             below :data:`UNKNOWNS_ACCURACY` (the default; the others are for measurements).
         curvature: ``(R, ỹ₀)``: the objective is ``½‖ỹ‖² + ½‖R(ỹ − ỹ₀)‖²`` (a sequential
             QP's curvature of the constraints); the Newton systems are then in the unknowns.
+        family: :attr:`~qpcontact.solvers.registry.Problem.family`: a problem of the family of the
+            last one grows its normal matrix from the last one's (:func:`_gram_matrix`).
 
     Returns:
         :class:`~qpcontact.solvers.registry.IterativeSolution` with the best iterate (smallest
@@ -319,7 +322,7 @@ def interior_point(
     """
     with quiet_numpy():  # numpy's BLAS threads out of the factorization's way
         return _iterate(matrix, rhs, lower, upper, tolerance, max_iterations, time_limit, initial, warm_shift, space,
-                        curvature)
+                        curvature, family)
 
 
 def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | None, lo: np.ndarray,
@@ -365,7 +368,8 @@ def _start(rows: _Rows, normal: GramMatrix | None, contact_matrix: GramMatrix | 
 
 def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upper: np.ndarray | None,
              tolerance: float, max_iterations: int | None, time_limit: float | None, initial: np.ndarray | None,
-             warm_shift: float, space: str, curvature: tuple[sp.spmatrix, np.ndarray] | None = None) -> IterativeSolution:
+             warm_shift: float, space: str, curvature: tuple[sp.spmatrix, np.ndarray] | None = None,
+             family: object | None = None) -> IterativeSolution:
     """:func:`interior_point` in one process: its rows and normal matrix, then :func:`iterate_rows`."""
     check_options(tolerance, max_iterations, time_limit)
     if space not in ("auto", "unknowns", "contacts"):
@@ -379,14 +383,14 @@ def _iterate(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None, upp
     if rows is None:
         return IterativeSolution(np.zeros(n), np.zeros(k), 0, False, "infeasible", np.inf, time.perf_counter() - start)
     # The normal matrices in the unknowns and in the contacts, made when first needed.
-    normal: GramMatrix | None = None if space == "contacts" else _gram_matrix(B)
+    normal: GramMatrix | None = None if space == "contacts" else _gram_matrix(B, family)
     if curvature is not None:
         # The curvature's RᵀR lies in the normal matrix's pattern (a row of R couples the cells
         # of one contact, as the row of B̃ does: the pattern and its analysis are kept): added to
         # each refill, in the unknowns only.
         R = sp.csr_matrix(curvature[0])
         if normal is None:
-            normal = _gram_matrix(B)
+            normal = _gram_matrix(B, family)
         values = normal.stored(R.T @ R)
         if values is None:  # it couples unknowns no contact couples: a pattern for both
             normal = GramMatrix(sp.vstack([B, R], format="csr"))
@@ -523,15 +527,22 @@ def _result(best: _Iterate, error: float, iteration: int, status: str, k: int, s
                              time.perf_counter() - start)
 
 
-#: The normal matrix of the last problem: the next one reuses it (its ordering and symbolic
-#: factorization) when its matrix has the same pattern (the linearizations of one position step).
+#: The normal matrix of the last problem and that problem's family: the next problem reuses it (its
+#: ordering and symbolic factorization) when its matrix has the same pattern, and grows its own from
+#: it when it is of the same family (:attr:`~qpcontact.solvers.registry.Problem.family`).
 _LAST: list[GramMatrix] = []
+_LAST_FAMILY: list[object | None] = [None]
 
 
-def _gram_matrix(matrix: sp.csr_matrix) -> GramMatrix:
-    if _LAST and _LAST[0].refresh(matrix):
-        return _LAST[0]
-    _LAST[:] = [GramMatrix(matrix)]
+def _gram_matrix(matrix: sp.csr_matrix, family: object | None = None) -> GramMatrix:
+    """The normal matrix of ``matrix``: the last one refreshed where the pattern is the same (and
+    its ordering was its own, or the family is the same: what a run computes never depends on
+    which problems came before its step, so a resumed run takes the same steps); grown from the
+    last one within a family (:class:`~qpcontact.solvers.cholesky.GramMatrix`); else made anew."""
+    same_family = family is not None and family is _LAST_FAMILY[0]
+    if not (_LAST and (same_family or not _LAST[0].inherited) and _LAST[0].refresh(matrix)):
+        _LAST[:] = [GramMatrix(matrix, grown_from=_LAST[0] if _LAST and same_family else None)]
+    _LAST_FAMILY[0] = family
     return _LAST[0]
 
 
@@ -542,7 +553,8 @@ def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, t
         assert problem.anchor is not None  # solve() refuses one without the other
         curvature = (problem.curvature, problem.anchor)
     out = interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
-                         time_limit=time_limit, max_iterations=settings.get("max_iterations"), curvature=curvature)
+                         time_limit=time_limit, max_iterations=settings.get("max_iterations"), curvature=curvature,
+                         family=problem.family)
     return out.output()
 
 

@@ -82,6 +82,11 @@ class Problem:
             :mod:`qpcontact.assembly.curvature`), or None: ``½‖ỹ‖²``. Only solvers declaring
             :attr:`SolverSpec.curvature` take it; the stationarity is then
             ``ỹ + RᵀR(ỹ − ỹ₀) = B̃ᵀλ̃ (+ α − β)`` (:meth:`gradient`).
+        family: problems given the same object (the linearizations of one position step: the
+            same unknowns, each with the contacts of the last and a few more) may share what a
+            solver sets up for their pattern (``ipm``: the ordering of the first, the pattern grown
+            from the last, :class:`~qpcontact.solvers.cholesky.GramMatrix`); None: set up from the
+            problem's own pattern alone. A solver's answer does not depend on it beyond rounding.
     """
 
     matrix: sp.csr_matrix
@@ -92,6 +97,7 @@ class Problem:
     upper: np.ndarray | None = None
     curvature: sp.csr_matrix | None = None
     anchor: np.ndarray | None = None
+    family: object | None = None
 
     def gradient(self, y: np.ndarray) -> np.ndarray:
         """The objective's gradient at ``ỹ`` (:func:`objective_gradient`)."""

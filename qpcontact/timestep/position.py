@@ -204,8 +204,8 @@ def _bounds(system: ContactSystem, cells: Cells, drive: np.ndarray, impulses: np
 
 def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray, aim: np.ndarray,
                dt: float, drive: np.ndarray, impulses: np.ndarray, planar: bool, settings: PositionSettings,
-               radius: np.ndarray | None, split: Split,
-               pushed: np.ndarray | None) -> tuple[ContactSystem, Problem, np.ndarray] | None:
+               radius: np.ndarray | None, split: Split, pushed: np.ndarray | None,
+               family: object | None = None) -> tuple[ContactSystem, Problem, np.ndarray] | None:
     """The QP of one linearization (module docstring) and its turning caps (:func:`_bounds`), or
     None when no contact asks for a push.
 
@@ -221,7 +221,8 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
 
     ``pushed``: (K,) each contact's impulse in the last solve, for a second-order linearization
     (the objective's curvature, :func:`~qpcontact.assembly.curvature.curvature_rows`); None: first
-    order."""
+    order. ``family``: the step's (:attr:`~qpcontact.solvers.registry.Problem.family`: its
+    linearizations share the solver's set-up)."""
     turned = Turned(axes=now.axes, jacobian=left_jacobian(turning_vectors(cells, dt, drive + impulses)))
     # The rows first (the right-hand side needs their product with the impulses so far), then
     # d_k + dt·(J W (x_new − x))_k ≥ target_k + aim_k  ⇔  (J W x_new)_k ≥ (target_k + aim_k − d_k)/dt + (J W x)_k
@@ -242,10 +243,10 @@ def _linearize(cells: Cells, now: Cells, contacts: Contacts, target: np.ndarray,
     anchor = None if curvature is None else system.from_impulses(impulses)
     if not settings.bounded:
         return system, Problem(system.matrix, system.rhs, system.column_inverse_mass, curvature=curvature,
-                               anchor=anchor), np.full(system.shape[1], np.inf)
+                               anchor=anchor, family=family), np.full(system.shape[1], np.inf)
     lower, upper, cap = _bounds(system, cells, drive, impulses, dt, settings, radius)
     return system, Problem(system.matrix, system.rhs, system.column_inverse_mass, lower=lower, upper=upper,
-                           curvature=curvature, anchor=anchor), cap
+                           curvature=curvature, anchor=anchor, family=family), cap
 
 
 def _turn_limited(system: ContactSystem, problem: Problem, cap: np.ndarray, y: np.ndarray) -> tuple[int, np.ndarray]:
@@ -541,7 +542,7 @@ def position_step(
         pushed = (progress.last.lookup(*progress.found.keyed(ids), progress.found.kind)
                   if step.second_order and not polish else None)
         linear = _linearize(cells, now, contacts, target, settings.aim * diameter, dt, drive,
-                            progress.impulses, planar, settings, progress.radius, step.split, pushed)
+                            progress.impulses, planar, settings, progress.radius, step.split, pushed, step.family)
         step.times["assemble"] += time.perf_counter() - t0
         step.times["assemble_cpu"] += time.process_time() - c0
         if linear is None:  # nothing asks for a push: the free motion is the answer
@@ -576,6 +577,7 @@ class _Step:
     span: int
     split: Split
     second_order: bool  # linearizations with the contacts' curvature (PositionSettings.second_order)
+    family: object  # what the step's problems share (Problem.family): this step, and no other
     predicted: Cells | None
     candidates: np.ndarray
     floors: Floors
@@ -602,8 +604,8 @@ def _begin(cells: Cells, dt: float, drive: np.ndarray, planes: list[Plane], plan
     times = {"detect": time.perf_counter() - started, "assemble": 0.0, "solve": 0.0,
              "detect_cpu": time.process_time() - started_cpu, "assemble_cpu": 0.0, "solve_cpu": 0.0}
     second_order = uses_second_order(settings, comm)
-    return _Step(cells, dt, drive, settings, planes, planar, form, reach, span, split, second_order, predicted,
-                 candidates, floors, times, started, started_cpu), start_overlap
+    return _Step(cells, dt, drive, settings, planes, planar, form, reach, span, split, second_order, object(),
+                 predicted, candidates, floors, times, started, started_cpu), start_overlap
 
 
 def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Contacts, np.ndarray, bool]:

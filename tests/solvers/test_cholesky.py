@@ -103,3 +103,53 @@ def test_a_constant_matrix_within_the_pattern_is_added_to_every_factorization():
     v = np.array([1.0, -2.0, 0.5])
     assert np.allclose(solve(v), np.linalg.solve(matrix, v))
     assert gram.stored(sp.csr_matrix(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]))) is None
+
+
+def _grown_pair(seed: int) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """A matrix and the next of its family: its rows with new values, in another order, some of
+    them twice, and rows between cells no row joined before (new entries of the pattern)."""
+    old = random_rows(seed)
+    rng = np.random.default_rng(seed + 100)
+    again = old[rng.permutation(old.shape[0])].tocsr()
+    again.data = rng.standard_normal(again.nnz)
+    new = random_rows(seed + 200, k=20)
+    return old, sp.vstack([again, old[:7], new], format="csr")
+
+
+@pytest.mark.parametrize("metis_size", [10**9, 0], ids=["amd", "nested-dissection"])
+def test_a_matrix_grown_from_the_last_of_its_family_is_the_matrix_built_anew(monkeypatch, metis_size, backend):
+    monkeypatch.setattr(cholesky, "METIS_SIZE", metis_size)
+    old, new = _grown_pair(3)
+    last = GramMatrix(old)
+    last.factor(np.ones(old.shape[0]), np.ones(old.shape[1]))
+    grown, anew = GramMatrix(new, grown_from=last), GramMatrix(new)
+    assert grown.inherited and not anew.inherited
+    assert grown.size > last.size  # the new rows' entries were added
+    rng = np.random.default_rng(4)
+    w, d = rng.random(new.shape[0]), 1.0 + rng.random(new.shape[1])
+    expected = (sp.diags(d) + new.T @ sp.diags(w) @ new).toarray()
+    for matrix in (grown, anew):
+        assert np.abs(matrix.lower(w, d).toarray() - np.tril(expected)).max() < 1e-12
+    v = rng.standard_normal(new.shape[1])
+    assert np.allclose(grown.factor(w, d)(v), np.linalg.solve(expected, v), rtol=1e-9, atol=1e-12)
+
+
+def test_a_grown_matrix_with_no_new_entries_keeps_the_last_analysis(backend):
+    old = random_rows(5)
+    last = GramMatrix(old)
+    last.factor(np.ones(old.shape[0]), np.ones(old.shape[1]))
+    again = old.copy()
+    again.data = np.random.default_rng(6).standard_normal(again.nnz)
+    grown = GramMatrix(sp.vstack([again, old[:3]], format="csr"), grown_from=last)
+    assert grown.size == last.size and grown._symbolic is not None and last._symbolic is None
+    w, d = np.ones(old.shape[0] + 3), np.ones(old.shape[1])
+    matrix = sp.vstack([again, old[:3]], format="csr")
+    expected = (sp.diags(d) + matrix.T @ matrix).toarray()
+    assert np.allclose(grown.factor(w, d)(np.ones(old.shape[1])), np.linalg.solve(expected, np.ones(old.shape[1])))
+
+
+def test_a_matrix_of_other_columns_or_mostly_new_rows_is_built_anew():
+    old = random_rows(7)
+    last = GramMatrix(old)
+    assert not GramMatrix(random_rows(8, n=303), grown_from=last).inherited  # other unknowns
+    assert not GramMatrix(random_rows(9), grown_from=last).inherited  # other rows altogether

@@ -196,3 +196,31 @@ def test_a_curvature_is_split_with_its_blocks(monkeypatch):
     assert np.abs(blockwise.y - whole.y).max() < 1e-6
     with pytest.raises(InvalidArgumentError, match="both"):
         solve(Problem(B, problem.rhs, curvature=R), "ipm")
+
+
+def test_a_family_shares_its_set_up_and_a_new_family_never_depends_on_the_last(monkeypatch):
+    """Problems of one family (a step's linearizations) grow their normal matrix from the last
+    one's (:func:`qpcontact.solvers.ipm._gram_matrix`) and get the answers they get alone; a
+    problem of another family gets, bit for bit, the answer it gets with nothing solved before
+    it (a resumed run takes the same steps)."""
+    import qpcontact.solvers.ipm as ipm
+    from qpcontact.solvers import cholesky
+    from tests.solvers.test_cholesky import _grown_pair
+
+    monkeypatch.setattr(cholesky, "METIS_SIZE", 0)  # an ordering of its own to inherit
+    first, second = _grown_pair(11)
+    rhs = np.random.default_rng(12).standard_normal(second.shape[0])
+    step = object()
+    monkeypatch.setattr(ipm, "_LAST", [])
+    interior_point(first, rhs[:first.shape[0]], tolerance=1e-8, family=step)
+    grown = interior_point(second, rhs, tolerance=1e-8, family=step)
+    assert ipm._LAST[0].inherited
+    alone = interior_point(second, rhs, tolerance=1e-8)
+    assert grown.converged and alone.converged
+    assert np.abs(grown.y - alone.y).max() <= 1e-6 * max(1.0, np.abs(alone.y).max())
+    # the same pattern in a new family: not the inherited ordering (refreshed only within its family)
+    after = interior_point(second, rhs, tolerance=1e-8, family=object())
+    assert not ipm._LAST[0].inherited
+    monkeypatch.setattr(ipm, "_LAST", [])
+    fresh = interior_point(second, rhs, tolerance=1e-8, family=object())
+    assert np.array_equal(after.y, fresh.y) and np.array_equal(after.lam, fresh.lam)
