@@ -180,7 +180,7 @@ def _grown(old: GramMatrix, csr: sp.csr_matrix, signatures: np.ndarray, first: n
     added = wanted[old._keys[at] != wanted]
     keys = old._keys if added.size == 0 else np.insert(old._keys, np.searchsorted(old._keys, added), added)
     position = np.empty(first.size, dtype=np.int64)
-    known = old._by_row[old._row_start[match[row[~fresh]]] + pair[~fresh]]
+    known = old._by_row[old._row_start[match[row[~fresh]]] + pair[~fresh]].astype(np.int64)
     position[~fresh] = known if added.size == 0 else known + np.searchsorted(added, old._keys[known])
     position[fresh] = np.searchsorted(keys, fresh_keys)
     return keys, position
@@ -204,7 +204,7 @@ class GramMatrix:
     0.1 s a linearization of a grown 2D colony of 5,000 cells, docs/performance.md). Built anew
     where it cannot be grown (:func:`_grown`).
 
-    Memory: about 16 bytes per product; a 2D colony has about 36 products per contact row, a 3D
+    Memory: about 20 bytes per product; a 2D colony has about 36 products per contact row, a 3D
     one about 78."""
 
     def __init__(self, matrix: sp.spmatrix, grown_from: GramMatrix | None = None) -> None:
@@ -242,7 +242,7 @@ class GramMatrix:
         # finds the entries of its rows here.
         pairs_per_row = self._counts * (self._counts + 1) // 2
         self._row_start = np.concatenate([[0], np.cumsum(pairs_per_row)])
-        self._by_row = np.empty(position.size, dtype=np.int64)
+        self._by_row = np.empty(position.size, dtype=np.int32 if self.size < 2**31 else np.int64)  # 4 bytes a product
         self._by_row[self._row_start[row] + pair] = position
         # P: one row per entry, one column per row of A (each row of A adds to an entry at most
         # once: no duplicates). scipy's conversion from triplets is a counting sort; the place of

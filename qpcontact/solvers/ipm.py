@@ -27,8 +27,10 @@ than the contacts' own normal matrix ``B̃B̃ᵀ`` (3× cheaper to factorize on 
 where a cell has 11 contacts and 6 unknowns). The pattern, its nested-dissection ordering and
 the symbolic analysis are computed once per problem
 (:class:`~qpcontact.solvers.cholesky.GramMatrix`), and reused by the next problem with the same
-pattern (the next linearization of a position step with the same contacts); each iteration
-refills the values (one sparse product) and factorizes. Around the factorization an iteration
+pattern; the next linearization of a position step (a problem of the same
+:attr:`~qpcontact.solvers.registry.Problem.family`) grows its pattern from the last one's and keeps
+its ordering, so that only the symbolic analysis is done again. Each iteration refills the values
+(one sparse product) and factorizes. Around the factorization an iteration
 does a few passes over the vectors: the step lengths over the slacks and the multipliers, the
 complementarity of a trial point from four dot products (docs/model-notes.md, "A lean step").
 
