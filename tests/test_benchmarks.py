@@ -125,3 +125,35 @@ def test_the_step_error_compares_one_step_with_substeps(tmp_path):
     assert len(rows) == 2
     rms_small = float(rows[1][8])
     assert rms_small < 0.01, rows[1]
+
+
+def test_the_error_against_time_table_puts_each_simulator_against_its_own_finest_step(tmp_path):
+    """benchmarks/cellmodeller/error_against_time.py: CellModeller's folders (their step and seed
+    from steps.json) and qpcontact's run folders, grouped by simulator and step, each statistic's
+    error against the same simulator's finest step, and the time to the size."""
+    import json
+    import shutil
+
+    data = ROOT / "tests" / "data" / "cellmodeller" / "cellmodeller_64.npz"
+    folders = []
+    for dt, seed, seconds in ((0.025, 1, 2.0), (0.05, 1, 1.0)):
+        folder = tmp_path / f"cm-{dt}-{seed}"
+        folder.mkdir()
+        shutil.copy(data, folder / "cellmodeller_64.npz")
+        log = [{"step": 1, "n": 32, "t_sim": seconds}, {"step": 2, "n": 64, "t_sim": seconds}]
+        (folder / "steps.json").write_text(json.dumps({"args": {"dt": dt, "seed": seed}, "log": log}))
+        folders.append(str(folder))
+    run = tmp_path / "qp"
+    done = subprocess.run([sys.executable, "-m", "qpcontact", "simulate", "--cells", "64", "--seed", "2", "--quiet",
+                           "--out", str(run)], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    out = tmp_path / "table.md"
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "cellmodeller" / "error_against_time.py"), "--size", "64",
+                           "--cellmodeller", *folders, "--qpcontact", str(run), "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    rows = [line for line in out.read_text().splitlines() if line.startswith("| CellModeller") or line.startswith("| qpcontact")]
+    assert [row.split(" | ")[1] for row in rows] == ["dt 0.025", "dt 0.05", "growth 0.05"]
+    assert " | 4.0 | " in rows[0] and " | 2.0 | " in rows[1]  # the time to 64 cells: both steps' times
+    # the same state at both steps: no error; the finest step's own row has none to show
+    assert "Δ+0.000" in rows[1] and "Δ" not in rows[0] and "Δ" not in rows[2]

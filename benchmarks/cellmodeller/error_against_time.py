@@ -96,9 +96,10 @@ def table(runs: list[Run], size: int) -> str:
         for step in steps:
             group = groups[simulator, step]
             times = [r[3] for r in group]
+            spread = f" ({min(times):.1f}–{max(times):.1f})" if len(times) > 1 else ""
             cells = [simulator, f"{'dt' if simulator == 'CellModeller' else 'growth'} {step:g}",
                      ", ".join(str(r[2]) for r in sorted(group, key=lambda r: r[2])),
-                     f"{np.median(times):.1f} ({min(times):.1f}–{max(times):.1f})"]
+                     f"{np.median(times):.1f}{spread}"]
             for name in names:
                 values = np.array([r[4][name] for r in group])
                 mean = float(np.mean(values))

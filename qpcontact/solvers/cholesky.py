@@ -153,6 +153,23 @@ def _row_signatures(csr: sp.csr_matrix) -> np.ndarray:
 GROWN_NEW_ROWS = 0.1
 
 
+def _pattern(csr: sp.csr_matrix, first: np.ndarray, second: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The keys ``column·n + row`` of the lower triangle of ``I + AᵀA`` (sorted: CSC order) for
+    ``A = csr``, and the entry of each product ``(first, second)`` of :func:`_row_pairs`.
+
+    From the structure, not the values: a product of stored zeros is dropped by scipy's matmul,
+    and a refresh (:meth:`GramMatrix.refresh`) may fill them (a planar step's Jacobian has zeros
+    where the next step's has values). Each product's entry by a binary search of its key (columns
+    sorted within a row of A: the first of a pair is the larger column, the row of the lower
+    triangle)."""
+    n = csr.shape[1]
+    structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
+    pattern = sp.tril(structure.T @ structure + sp.identity(n, format="csc"), format="csc")
+    pattern.sort_indices()
+    keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
+    return keys, np.searchsorted(keys, csr.indices[second].astype(np.int64) * n + csr.indices[first])
+
+
 def _grown(old: GramMatrix, csr: sp.csr_matrix, signatures: np.ndarray, first: np.ndarray, second: np.ndarray,
            row: np.ndarray, pair: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The pattern's keys and each product's entry for ``csr`` grown from the matrix of ``old``
@@ -217,21 +234,7 @@ class GramMatrix:
         grown = None if grown_from is None else _grown(grown_from, csr, self._signatures, first, second, row, pair)
         #: The ordering was computed for another matrix of the family (:meth:`refresh`).
         self.inherited = grown is not None
-        if grown is None:
-            # The pattern (with the whole diagonal) in CSC order, lower triangle, from the structure,
-            # not the values: a product of stored zeros is dropped by scipy's matmul, and a refresh
-            # (:meth:`refresh`) may fill them (a planar step's Jacobian has zeros where the next
-            # step's has values).
-            structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
-            pattern = sp.tril(structure.T @ structure + sp.identity(n, format="csc"), format="csc")
-            pattern.sort_indices()
-            keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
-            # Each product's entry by a binary search of its (column, row) key (columns sorted
-            # within a row of A: the first of a pair is the larger column, the row of the lower
-            # triangle).
-            position = np.searchsorted(keys, csr.indices[second].astype(np.int64) * n + csr.indices[first])
-        else:
-            keys, position = grown
+        keys, position = _pattern(csr, first, second) if grown is None else grown
         column_of_entry, row_of_entry = keys // n, keys % n
         indptr = np.concatenate([[0], np.cumsum(np.bincount(column_of_entry, minlength=n))])
         self.diagonal_position = np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
