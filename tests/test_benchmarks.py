@@ -149,7 +149,8 @@ def test_the_error_against_time_table_puts_each_simulator_against_its_own_finest
     assert done.returncode == 0, done.stderr
     out = tmp_path / "table.md"
     done = subprocess.run([sys.executable, str(BENCHMARKS / "cellmodeller" / "error_against_time.py"), "--size", "64",
-                           "--cellmodeller", *folders, "--qpcontact", str(run), "--out", str(out)],
+                           "--cellmodeller", *folders, "--qpcontact", str(run), "--out", str(out),
+                           "--plot", str(tmp_path / "plot.png")],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     rows = [line for line in out.read_text().splitlines() if line.startswith("| CellModeller") or line.startswith("| qpcontact")]
@@ -157,3 +158,4 @@ def test_the_error_against_time_table_puts_each_simulator_against_its_own_finest
     assert " | 4.0 | " in rows[0] and " | 2.0 | " in rows[1]  # the time to 64 cells: both steps' times
     # the same state at both steps: no error; the finest step's own row has none to show
     assert "Δ+0.000" in rows[1] and "Δ" not in rows[0] and "Δ" not in rows[2]
+    assert (tmp_path / "plot.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

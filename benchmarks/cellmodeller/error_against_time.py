@@ -16,11 +16,12 @@ Inputs: CellModeller's folders from ``grow_cellmodeller.py --dt DT --seed S --ta
 the sum of its steps' ``t_sim`` up to the first step with at least N cells), and qpcontact's run
 folders from ``qpcontact simulate --cells N --seed S --growth-per-step G`` (the step and seed from
 each run's settings; the state is the first snapshot with at least N cells, the time the sum of
-its history's step times up to there). Prints a Markdown table and writes it to ``--out``::
+its history's step times up to there). Prints a Markdown table and writes it to ``--out``, and
+draws each statistic's error against the time into ``--plot``::
 
     python benchmarks/cellmodeller/error_against_time.py --size 5000 \\
         --cellmodeller cm-dt0.05-s1 cm-dt0.05-s2 cm-dt0.0125-s1 ... --qpcontact qp-g0.05-s1 ... \\
-        --out error-against-time.md
+        --out error-against-time.md --plot error-against-time.png
 """
 
 from __future__ import annotations
@@ -111,12 +112,43 @@ def table(runs: list[Run], size: int) -> str:
     return "\n".join(lines)
 
 
+def plot(runs: list[Run], size: int, path: Path) -> None:
+    """Each statistic's error (the mean over the seeds less the same simulator's finest step's)
+    against the median time to ``size``, one line per simulator, each point labelled with its step."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(13, 7.5), dpi=110, layout="constrained")
+    axes = fig.subplots(2, 3).ravel()
+    for ax in axes[len(REPORTED[2]):]:
+        ax.set_visible(False)
+    for ax, name in zip(axes, REPORTED[2], strict=False):
+        for simulator in sorted({r[0] for r in runs}):
+            steps = sorted({r[1] for r in runs if r[0] == simulator})
+            mean = {step: float(np.mean([r[4][name] for r in runs if r[0] == simulator and r[1] == step]))
+                    for step in steps}
+            time = [float(np.median([r[3] for r in runs if r[0] == simulator and r[1] == step])) for step in steps]
+            error = [mean[step] - mean[steps[0]] for step in steps]
+            ax.plot(time, error, "o-", label=simulator)
+            for step, x, y in zip(steps, time, error, strict=True):
+                ax.annotate(f"{step:g}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
+        unit = DEFINITIONS[name][0]
+        ax.set(xscale="log", xlabel=f"time to {size:,} cells [s]", title=name,
+               ylabel=f"error against the finest step{'' if unit in ('', 'dimensionless') else f' [{unit}]'}")
+        ax.axhline(0.0, color="0.5", lw=0.8)
+        ax.xaxis.set_minor_formatter("")  # the decades only: the minor labels overlap
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    fig.suptitle(f"Error against run time, {size:,} cells: each simulator against its own finest step")
+    fig.savefig(path)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     parser.add_argument("--size", type=int, default=5000, help="the colony size compared (default 5000)")
     parser.add_argument("--cellmodeller", type=Path, nargs="*", default=[], help="grow_cellmodeller.py's folders")
     parser.add_argument("--qpcontact", type=Path, nargs="*", default=[], help="qpcontact simulate's run folders")
     parser.add_argument("--out", type=Path, help="also write the table (Markdown) to this file")
+    parser.add_argument("--plot", type=Path, help="also draw each statistic's error against the time (PNG)")
     args = parser.parse_args(argv)
     if not args.cellmodeller and not args.qpcontact:
         parser.error("give --cellmodeller or --qpcontact folders")
@@ -129,6 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     print(text)
     if args.out is not None:
         args.out.write_text(text)
+    if args.plot is not None:
+        plot(runs, args.size, args.plot)
     return 0
 
 
