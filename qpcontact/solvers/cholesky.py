@@ -140,12 +140,12 @@ def _row_pairs(indptr: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, 
     return np.concatenate(firsts), np.concatenate(seconds), np.concatenate(rows), np.concatenate(pairs)
 
 
-def _row_signatures(csr: sp.csr_matrix) -> np.ndarray:
-    """(K,) a number per row of ``csr`` that only rows with the same columns share (a sum of random
-    weights of its columns, fixed by the number of columns: two rows with different columns share
-    one with a probability of about 10⁻¹⁶)."""
-    weights = np.random.default_rng(csr.shape[1]).random(csr.shape[1]) + 1.0
-    return sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape) @ weights
+def _row_signatures(structure: sp.csr_matrix) -> np.ndarray:
+    """(K,) a number per row of ``structure`` (a matrix's pattern, ones where it stores entries)
+    that only rows with the same columns share (a sum of random weights of its columns, fixed by
+    the number of columns: two rows with different columns share one with a probability of about
+    10⁻¹⁶)."""
+    return structure @ (np.random.default_rng(structure.shape[1]).random(structure.shape[1]) + 1.0)
 
 
 #: A matrix is grown from the last one of its family (:class:`GramMatrix`, ``grown_from``) only when
@@ -153,9 +153,11 @@ def _row_signatures(csr: sp.csr_matrix) -> np.ndarray:
 GROWN_NEW_ROWS = 0.1
 
 
-def _pattern(csr: sp.csr_matrix, first: np.ndarray, second: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _pattern(csr: sp.csr_matrix, structure: sp.csr_matrix, first: np.ndarray,
+             second: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The keys ``column·n + row`` of the lower triangle of ``I + AᵀA`` (sorted: CSC order) for
-    ``A = csr``, and the entry of each product ``(first, second)`` of :func:`_row_pairs`.
+    ``A = csr`` (``structure``: its pattern, ones where it stores entries), and the entry of each
+    product ``(first, second)`` of :func:`_row_pairs`.
 
     From the structure, not the values: a product of stored zeros is dropped by scipy's matmul,
     and a refresh (:meth:`GramMatrix.refresh`) may fill them (a planar step's Jacobian has zeros
@@ -163,7 +165,6 @@ def _pattern(csr: sp.csr_matrix, first: np.ndarray, second: np.ndarray) -> tuple
     sorted within a row of A: the first of a pair is the larger column, the row of the lower
     triangle)."""
     n = csr.shape[1]
-    structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
     pattern = sp.tril(structure.T @ structure + sp.identity(n, format="csc"), format="csc")
     pattern.sort_indices()
     keys = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr)) * n + pattern.indices
@@ -218,7 +219,7 @@ class GramMatrix:
     kept, and so are its entries and the place of each product of a row with the same columns, so
     only the products of new rows are looked up and only the entries they add are inserted (a
     new pattern costs a symbolic analysis, not a nested dissection and a search of every product:
-    0.1 s a linearization of a grown 2D colony of 5,000 cells, docs/performance.md). Built anew
+    0.1 s a linearization of a grown 2D colony of 5,000 cells, docs/model-notes.md). Built anew
     where it cannot be grown (:func:`_grown`).
 
     Memory: about 20 bytes per product; a 2D colony has about 36 products per contact row, a 3D
@@ -230,11 +231,12 @@ class GramMatrix:
         csr.sort_indices()
         k, n = csr.shape
         first, second, row, pair = _row_pairs(csr.indptr)
-        self._signatures, self._counts = _row_signatures(csr), np.diff(csr.indptr)
+        structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
+        self._signatures, self._counts = _row_signatures(structure), np.diff(csr.indptr)
         grown = None if grown_from is None else _grown(grown_from, csr, self._signatures, first, second, row, pair)
         #: The ordering was computed for another matrix of the family (:meth:`refresh`).
         self.inherited = grown is not None
-        keys, position = _pattern(csr, first, second) if grown is None else grown
+        keys, position = _pattern(csr, structure, first, second) if grown is None else grown
         column_of_entry, row_of_entry = keys // n, keys % n
         indptr = np.concatenate([[0], np.cumsum(np.bincount(column_of_entry, minlength=n))])
         self.diagonal_position = np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
@@ -260,8 +262,7 @@ class GramMatrix:
         self.backend = BACKEND
         self._matrix: Any = None
         self._symbolic: Any = None
-        same = grown_from is not None and grown is not None and np.array_equal(keys, grown_from._keys)
-        if same and grown_from is not None and grown_from.backend == self.backend:
+        if grown_from is not None and keys is grown_from._keys and grown_from.backend == self.backend:
             # The same pattern: its matrix and analysis are this one's (the last is not used again).
             self._matrix, self._symbolic = grown_from._matrix, grown_from._symbolic
             grown_from._matrix = grown_from._symbolic = None
