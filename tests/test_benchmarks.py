@@ -22,16 +22,42 @@ def test_the_before_after_timing_runs_against_a_checkout():
     assert "| 2D | 200 | detect |" in done.stdout and "| True |" in done.stdout
 
 
-def _cellmodeller_harness():
-    """benchmarks/cellmodeller/grow_cellmodeller.py as a module (CellModeller itself is imported
-    only when it runs, so its helpers are tested here without it)."""
+def _script(name: str):
+    """benchmarks/cellmodeller/<name>.py as a module."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location("grow_cellmodeller", BENCHMARKS / "cellmodeller" / "grow_cellmodeller.py")
+    spec = importlib.util.spec_from_file_location(name, BENCHMARKS / "cellmodeller" / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _cellmodeller_harness():
+    """benchmarks/cellmodeller/grow_cellmodeller.py as a module (CellModeller itself is imported
+    only when it runs, so its helpers are tested here without it)."""
+    return _script("grow_cellmodeller")
+
+
+def test_the_model_comparison_counts_sectors_at_the_rim_and_takes_the_packages_statistics():
+    """compare_models.py: a ring of 40 tangential cells (every cell at the rim), two halves of
+    one type each: two sectors; alternating types: none; its other statistics are the package's."""
+    import numpy as np
+
+    from qpcontact.colony.statistics import colony_statistics
+    from qpcontact.geometry import Cells
+
+    angle = np.linspace(0.0, 2 * np.pi, 40, endpoint=False)
+    centers = np.column_stack([21.0 * np.cos(angle), 21.0 * np.sin(angle), np.zeros(40)])
+    axes = np.column_stack([-np.sin(angle), np.cos(angle), np.zeros(40)])
+    cells = Cells(centers=centers, axes=axes, lengths=np.full(40, 2.0), radii=np.full(40, 0.5))
+    compare = _script("compare_models")
+    halves = compare.statistics(cells, (np.arange(40) >= 20).astype(int))
+    assert halves["sectors"] == 2 and halves["type1_fraction"] == 0.5
+    assert compare.statistics(cells, np.arange(40) % 2)["sectors"] == 0
+    package = colony_statistics(cells, dimensions=2)
+    assert halves["packing"] == package.packing and halves["edge_alignment"] == package.edge_alignment
+    assert halves["edge_alignment"] < -0.99  # tangential
 
 
 def test_the_cellmodeller_harness_writes_the_step_log_bench_grown_reads(tmp_path):
