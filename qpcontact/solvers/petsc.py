@@ -254,41 +254,40 @@ class DistributedGram:
     Each process assembles the rows of the normal matrix of its own unknowns, upper triangle
     (PETSc's MPISBAIJ), from the rows of ``B̃`` that touch them: its own, and those of other
     processes that read its unknowns (the halo rows), which they send once per problem
-    (:func:`_halo_rows`); at each refill only the weights of the halo rows travel. The refill is
-    one sparse product, as in :class:`~qpcontact.solvers.cholesky.GramMatrix`: no process forms
-    products for another's rows, and PETSc's assembly moves nothing.
+    (:func:`_halo_rows`); at each refill only the weights of the halo rows travel. The values are
+    those of a :class:`~qpcontact.solvers.cholesky.NormalPattern` of these rows (one sparse
+    product), of which this process keeps its own rows: no process forms products for another's
+    rows but where a halo row reads two other processes' unknowns, and PETSc's assembly moves
+    nothing.
 
     Args:
         local: this process's rows of ``B̃``, the columns numbered in the order of the
             processes' blocks (:func:`_distributed_matrix`).
         column_counts: (P,) the columns each process owns (:class:`Partition`).
         comm: the mpi4py communicator.
+        family: the problem's :attr:`~qpcontact.solvers.registry.Problem.family`: the pattern
+            grows from the last one of the family, as the one-process normal matrix's does.
     """
 
-    def __init__(self, local: sp.csr_matrix, column_counts: np.ndarray, comm: Any) -> None:
+    def __init__(self, local: sp.csr_matrix, column_counts: np.ndarray, comm: Any, family: object | None = None) -> None:
         PETSc = petsc()
         n = local.shape[1]
         rank = comm.Get_rank()
-        first = int(column_counts[:rank].sum())
-        owned = int(column_counts[rank])
+        first, owned = int(column_counts[:rank].sum()), int(column_counts[rank])
         self._comm = comm
         rows, self._send_rows, self._send_counts, self._receive_counts = _halo_rows(local, column_counts, comm)
-        pair_first, pair_second, pair_row, _ = cholesky._row_pairs(rows.indptr)
-        low = rows.indices[pair_second].astype(np.int64)  # columns sorted in a row: the smaller of the pair
-        mine = (low >= first) & (low < first + owned)
-        keys = low[mine] * n + rows.indices[pair_first[mine]]
-        diagonal = np.arange(first, first + owned, dtype=np.int64) * (n + 1)
-        pattern = np.union1d(keys, diagonal)
-        self._diagonal_position = np.searchsorted(pattern, diagonal)
-        self._scatter = sp.csr_matrix(
-            (rows.data[pair_first[mine]] * rows.data[pair_second[mine]],
-             (np.searchsorted(pattern, keys), pair_row[mine])), shape=(pattern.size, rows.shape[0]))
-        self._indptr = np.concatenate([[0], np.cumsum(np.bincount(pattern // n - first, minlength=owned))]
+        self._pattern = _normal_pattern(rows, family)
+        keys = self._pattern.keys  # column·n + row of the lower triangle: the rows of the upper one
+        self._mine = slice(*(int(i) for i in np.searchsorted(keys, [first * n, (first + owned) * n])))
+        mine = keys[self._mine]
+        self._indptr = np.concatenate([[0], np.cumsum(np.bincount(mine // n - first, minlength=owned))]
                                       ).astype(PETSc.IntType)
-        self._indices = (pattern % n).astype(PETSc.IntType)
+        self._indices = (mine % n).astype(PETSc.IntType)
         self._global_rows = np.arange(first, first + owned, dtype=PETSc.IntType)
+        self._diagonal = np.zeros(n)  # this process's part set at each refill
+        self._own_columns = slice(first, first + owned)
         self._normal = PETSc.Mat().createSBAIJ(size=((owned, n), (owned, n)), bsize=1,
-                                               csr=(self._indptr, self._indices, np.zeros(pattern.size)),
+                                               csr=(self._indptr, self._indices, np.zeros(mine.size)),
                                                comm=_petsc_comm(comm))
         self._normal.setOption(PETSc.Mat.Option.SPD, True)  # MUMPS's Cholesky without pivoting
         self._normal.assemble()
@@ -325,8 +324,8 @@ class DistributedGram:
         """
         if extra is not None:
             raise InvalidArgumentError("curvature: the distributed interior point takes none (a first-order step)")
-        values = self._scatter @ self._weights(np.asarray(w, dtype=float))
-        values[self._diagonal_position] += d
+        self._diagonal[self._own_columns] = d
+        values = self._pattern.values(self._weights(np.asarray(w, dtype=float)), self._diagonal)[self._mine]
         self._normal.setValuesIJV(self._indptr, self._indices, values, rowmap=self._global_rows)
         self._normal.assemble()
         self._ksp.setOperators(self._normal)
@@ -361,6 +360,22 @@ class DistributedGram:
         """Free PETSc's objects (collective)."""
         for obj in (self._ksp, self._normal, self._x, self._b):
             obj.destroy()
+
+
+#: The pattern of the last distributed normal matrix and its problem's family: the next problem of
+#: the family grows its own from it (:class:`~qpcontact.solvers.cholesky.NormalPattern`). The values
+#: are the same either way (the same products summed in the same order), and MUMPS orders each
+#: problem anew, so what a run computes does not depend on it.
+_LAST: list[cholesky.NormalPattern] = []
+_LAST_FAMILY: list[object | None] = [None]
+
+
+def _normal_pattern(rows: sp.csr_matrix, family: object | None) -> cholesky.NormalPattern:
+    """The pattern of ``rowsᵀ diag(w) rows``, grown from the last one of the same family."""
+    grown_from = _LAST[0] if _LAST and family is not None and family is _LAST_FAMILY[0] else None
+    _LAST[:] = [cholesky.NormalPattern(rows, grown_from=grown_from)]
+    _LAST_FAMILY[0] = family
+    return _LAST[0]
 
 
 def _halo_rows(local: sp.csr_matrix, column_counts: np.ndarray,
@@ -404,13 +419,15 @@ def _gather(part: np.ndarray, order: np.ndarray, counts: np.ndarray, comm: Any) 
 def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None = None,
                                upper: np.ndarray | None = None, *, tolerance: float = 1e-4,
                                max_iterations: int | None = None, time_limit: float | None = None,
-                               comm: Any = None, owners: tuple[np.ndarray, np.ndarray] | None = None
-                               ) -> IterativeSolution:
+                               comm: Any = None, owners: tuple[np.ndarray, np.ndarray] | None = None,
+                               family: object | None = None) -> IterativeSolution:
     """:func:`qpcontact.solvers.ipm.interior_point` over the processes of ``comm`` (default
     :func:`world`): every process passes the same problem and gets the same answer (module
     docstring). ``owners``: ``(column_owner, row_owner)``, the process of each unknown and each
     row (:class:`Partition`); then a process reads only its own rows of ``matrix`` and
     ``rhs`` (the others may be left empty: the position step assembles only its own).
+    ``family``: :attr:`~qpcontact.solvers.registry.Problem.family` (the normal matrix's pattern
+    grows from the last problem's of the same family).
 
     Raises:
         InvalidArgumentError: a tolerance below :data:`~qpcontact.solvers.ipm.UNKNOWNS_ACCURACY`
@@ -431,7 +448,7 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
     mine, my_rows = partition.columns(comm.Get_rank()), partition.rows(comm.Get_rank())
     mat, local, halo = _distributed_matrix(B, partition, my_rows, comm)
     reduce = _Reductions(comm)
-    normal = DistributedGram(local, partition.column_counts, comm)
+    normal = DistributedGram(local, partition.column_counts, comm, family)
     try:
         rows = make_rows(_Operator(mat, False, halo), _Operator(mat, True, halo), np.asarray(rhs, dtype=float)[my_rows],
                          lo[mine], hi[mine], reduce)
@@ -486,7 +503,7 @@ def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, t
            settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
     out = distributed_interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
                                      time_limit=time_limit, max_iterations=settings.get("max_iterations"),
-                                     comm=settings.get("comm"), owners=settings.get("owners"))
+                                     comm=settings.get("comm"), owners=settings.get("owners"), family=problem.family)
     return out.output()
 
 
