@@ -289,7 +289,6 @@ class DistributedGram:
         self._normal = PETSc.Mat().createSBAIJ(size=((owned, n), (owned, n)), bsize=1,
                                                csr=(self._indptr, self._indices, np.zeros(mine.size)),
                                                comm=_petsc_comm(comm))
-        self._normal.setOption(PETSc.Mat.Option.SPD, True)  # MUMPS's Cholesky without pivoting
         self._normal.assemble()
         self._ksp = PETSc.KSP().create(comm=self._normal.getComm())
         self._ksp.setType(PETSc.KSP.Type.PREONLY)
@@ -328,6 +327,9 @@ class DistributedGram:
         values = self._pattern.values(self._weights(np.asarray(w, dtype=float)), self._diagonal)[self._mine]
         self._normal.setValuesIJV(self._indptr, self._indices, values, rowmap=self._global_rows)
         self._normal.assemble()
+        # After each assembly, which forgets it: MUMPS's Cholesky without pivoting (its positive
+        # definite mode; else an LDLᵀ with pivoting, 1.3× the time, measured 2026-12-05).
+        self._normal.setOption(petsc().Mat.Option.SPD, True)
         self._ksp.setOperators(self._normal)
         cpu = time.process_time()
         self._ksp.setUp()
