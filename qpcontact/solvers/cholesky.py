@@ -171,10 +171,10 @@ def _pattern(csr: sp.csr_matrix, structure: sp.csr_matrix, first: np.ndarray,
     return keys, np.searchsorted(keys, csr.indices[second].astype(np.int64) * n + csr.indices[first])
 
 
-def _grown(old: NormalPattern, csr: sp.csr_matrix, signatures: np.ndarray, first: np.ndarray, second: np.ndarray,
+def _grown(old: GramMatrix, csr: sp.csr_matrix, signatures: np.ndarray, first: np.ndarray, second: np.ndarray,
            row: np.ndarray, pair: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """The pattern's keys and each product's entry for ``csr`` grown from the matrix of ``old``
-    (:class:`NormalPattern`, ``grown_from``; ``signatures``: :func:`_row_signatures` of ``csr``;
+    (:class:`GramMatrix`, ``grown_from``; ``signatures``: :func:`_row_signatures` of ``csr``;
     ``first, second, row, pair``: :func:`_row_pairs`), or None where it cannot be (another number of columns,
     more than :data:`GROWN_NEW_ROWS` of its rows with columns no row of ``old`` had).
 
@@ -194,20 +194,19 @@ def _grown(old: NormalPattern, csr: sp.csr_matrix, signatures: np.ndarray, first
     fresh = ~found[row]
     fresh_keys = csr.indices[second[fresh]].astype(np.int64) * n + csr.indices[first[fresh]]
     wanted = np.unique(fresh_keys)  # few (the new rows'): the old keys are sorted already
-    at = np.minimum(np.searchsorted(old.keys, wanted), old.keys.size - 1)
-    added = wanted[old.keys[at] != wanted]
-    keys = old.keys if added.size == 0 else np.insert(old.keys, np.searchsorted(old.keys, added), added)
+    at = np.minimum(np.searchsorted(old._keys, wanted), old._keys.size - 1)
+    added = wanted[old._keys[at] != wanted]
+    keys = old._keys if added.size == 0 else np.insert(old._keys, np.searchsorted(old._keys, added), added)
     position = np.empty(first.size, dtype=np.int64)
     known = old._by_row[old._row_start[match[row[~fresh]]] + pair[~fresh]].astype(np.int64)
-    position[~fresh] = known if added.size == 0 else known + np.searchsorted(added, old.keys[known])
+    position[~fresh] = known if added.size == 0 else known + np.searchsorted(added, old._keys[known])
     position[fresh] = np.searchsorted(keys, fresh_keys)
     return keys, position
 
 
-class NormalPattern:
+class GramMatrix:
     """``diag(d) + Aᵀ diag(w) A`` (n × n, for a K × n sparse ``A``) with the pattern of ``A``
-    fixed, refilled for each ``w ≥ 0``, ``d > 0``: its stored entries, the lower triangle in CSC
-    order (which is the upper triangle in CSR order), and their values (:meth:`values`).
+    fixed, refilled for each ``w ≥ 0``, ``d > 0`` and factorized (module docstring).
 
     The refill is one sparse product ``P w``: ``P`` (entries of the lower triangle × rows of
     ``A``) holds each product ``A_ki A_kj`` at the place of entry ``(i, j)`` and row ``k``, in
@@ -215,23 +214,18 @@ class NormalPattern:
     weighted ``np.bincount`` over the products took 10 ms a refill on a grown 2D colony of 5,000
     cells, the product 2 ms; 2026-12-04).
 
-    ``grown_from``: the pattern of the last problem of the same family (the linearizations of one
-    position step: the same unknowns, the contacts of the last and a few more): its entries are
-    kept, and so is the place of each product of a row with the same columns, so only the
-    products of new rows are looked up and only the entries they add are inserted (0.1 s a
-    linearization of a grown 2D colony of 5,000 cells, docs/model-notes.md). Built anew where it
-    cannot be grown (:func:`_grown`).
+    ``grown_from``: the matrix of the last problem of the same family (the linearizations of one
+    position step: the same unknowns, the contacts of the last and a few more): its ordering is
+    kept, and so are its entries and the place of each product of a row with the same columns, so
+    only the products of new rows are looked up and only the entries they add are inserted (a
+    new pattern costs a symbolic analysis, not a nested dissection and a search of every product:
+    0.1 s a linearization of a grown 2D colony of 5,000 cells, docs/model-notes.md). Built anew
+    where it cannot be grown (:func:`_grown`).
 
     Memory: about 20 bytes per product; a 2D colony has about 36 products per contact row, a 3D
-    one about 78.
+    one about 78."""
 
-    Attributes:
-        keys: (entries,) ``column·n + row`` of each stored entry, sorted.
-        diagonal_position: (n,) the place of each diagonal entry among them.
-        inherited: it was grown from another problem's pattern.
-    """
-
-    def __init__(self, matrix: sp.spmatrix, grown_from: NormalPattern | None = None) -> None:
+    def __init__(self, matrix: sp.spmatrix, grown_from: GramMatrix | None = None) -> None:
         csr = sp.csr_matrix(matrix)
         csr.sum_duplicates()
         csr.sort_indices()
@@ -240,15 +234,16 @@ class NormalPattern:
         structure = sp.csr_matrix((np.ones(csr.nnz), csr.indices, csr.indptr), shape=csr.shape)
         self._signatures, self._counts = _row_signatures(structure), np.diff(csr.indptr)
         grown = None if grown_from is None else _grown(grown_from, csr, self._signatures, first, second, row, pair)
+        #: The ordering was computed for another matrix of the family (:meth:`refresh`).
         self.inherited = grown is not None
         keys, position = _pattern(csr, structure, first, second) if grown is None else grown
         column_of_entry, row_of_entry = keys // n, keys % n
         indptr = np.concatenate([[0], np.cumsum(np.bincount(column_of_entry, minlength=n))])
         self.diagonal_position = np.searchsorted(keys, np.arange(n, dtype=np.int64) * (n + 1))
-        self.keys = keys
+        self._keys = keys
         self.size = keys.size
         self.shape = (n, n)
-        # Each product's entry, by row of A and its place in the row: a pattern grown from this one
+        # Each product's entry, by row of A and its place in the row: a matrix grown from this one
         # finds the entries of its rows here.
         pairs_per_row = self._counts * (self._counts + 1) // 2
         self._row_start = np.concatenate([[0], np.cumsum(pairs_per_row)])
@@ -264,7 +259,21 @@ class NormalPattern:
         self._scatter = placed
         self._indptr, self._indices = csr.indptr.copy(), csr.indices.copy()
         self._lower_pattern = (indptr, row_of_entry)
-        self._source = csr  # A, for an ordering (GramMatrix)
+        self.backend = BACKEND
+        self._matrix: Any = None
+        self._symbolic: Any = None
+        if grown_from is not None and keys is grown_from._keys and grown_from.backend == self.backend:
+            # The same pattern: its matrix and analysis are this one's (the last is not used again).
+            self._matrix, self._symbolic = grown_from._matrix, grown_from._symbolic
+            grown_from._matrix = grown_from._symbolic = None
+        if self.backend == "pardiso":
+            # The lower triangle in CSC is the upper triangle in CSR, which PARDISO takes.
+            self._pattern = (indptr.astype(np.int32), row_of_entry.astype(np.int32))
+        else:
+            self._rows = cvxopt.matrix(row_of_entry, tc="i")
+            self._cols = cvxopt.matrix(column_of_entry, tc="i")
+            self._permutation = (getattr(grown_from, "_permutation", None) if grown is not None
+                                 else _nested_dissection(csr))
 
     def refresh(self, matrix: sp.spmatrix) -> bool:
         """Take the values of ``matrix`` if it has the pattern this was built for (then the
@@ -283,8 +292,8 @@ class NormalPattern:
         lower = sp.tril(sp.csc_matrix(symmetric), format="csc")
         lower.sum_duplicates()
         keys = np.repeat(np.arange(self.shape[0], dtype=np.int64), np.diff(lower.indptr)) * self.shape[0] + lower.indices
-        position = np.minimum(np.searchsorted(self.keys, keys), self.keys.size - 1)
-        if not np.array_equal(self.keys[position], keys):
+        position = np.minimum(np.searchsorted(self._keys, keys), self._keys.size - 1)
+        if not np.array_equal(self._keys[position], keys):
             return None
         out = np.zeros(self.size)
         np.add.at(out, position, lower.data)
@@ -302,38 +311,6 @@ class NormalPattern:
         """The lower triangle of ``diag(d) + Aᵀ diag(w) A`` as a sparse matrix (what is factorized)."""
         indptr, indices = self._lower_pattern
         return sp.csc_matrix((self.values(w, d), indices, indptr), shape=self.shape)
-
-
-class GramMatrix(NormalPattern):
-    """:class:`NormalPattern` factorized (module docstring): the fill-reducing ordering and the
-    symbolic analysis once, the numeric factorization for each ``w``, ``d``.
-
-    ``grown_from``: as :class:`NormalPattern`'s; its ordering is kept too, and CHOLMOD's symbolic
-    analysis alone is redone (a new pattern costs a symbolic analysis, not a nested dissection and
-    a search of every product).
-
-    Attributes:
-        inherited: the ordering was computed for another matrix of the family (:meth:`refresh`).
-    """
-
-    def __init__(self, matrix: sp.spmatrix, grown_from: GramMatrix | None = None) -> None:
-        super().__init__(matrix, grown_from)
-        indptr, row_of_entry = self._lower_pattern
-        self.backend = BACKEND
-        self._matrix: Any = None
-        self._symbolic: Any = None
-        if grown_from is not None and self.keys is grown_from.keys and grown_from.backend == self.backend:
-            # The same pattern: its matrix and analysis are this one's (the last is not used again).
-            self._matrix, self._symbolic = grown_from._matrix, grown_from._symbolic
-            grown_from._matrix = grown_from._symbolic = None
-        if self.backend == "pardiso":
-            # The lower triangle in CSC is the upper triangle in CSR, which PARDISO takes.
-            self._pattern = (indptr.astype(np.int32), row_of_entry.astype(np.int32))
-        else:
-            self._rows = cvxopt.matrix(row_of_entry, tc="i")
-            self._cols = cvxopt.matrix(self.keys // self.shape[0], tc="i")
-            self._permutation = (getattr(grown_from, "_permutation", None) if self.inherited
-                                 else _nested_dissection(self._source))
 
     def factor(self, w: np.ndarray, d: np.ndarray, extra: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
         """Factorize for these weights; returns a function ``v ↦ (diag(d) + Aᵀ diag(w) A + E)⁻¹ v``,

@@ -10,10 +10,9 @@ connected regions of the contact graph, each row with its first cell), and the i
 
 - the products with ``B̃`` and ``B̃ᵀ`` are PETSc's (an MPIAIJ matrix; the halo of unknowns that
   a process's rows read from its neighbours is PETSc's scatter);
-- the normal matrix ``diag(d) + B̃ᵀ diag(w) B̃``: each process assembles the rows of its own
-  unknowns from the rows of ``B̃`` that touch them (:class:`DistributedGram`: its pattern once
-  per problem, its values each iteration), factorized by MUMPS (Cholesky, its symbolic analysis
-  once per problem);
+- the normal matrix ``diag(d) + B̃ᵀ diag(w) B̃`` is PETSc's ``MatTransposeMatMult`` of the
+  row-scaled ``B̃`` (its pattern once per problem, its values each iteration), factorized by
+  MUMPS (Cholesky, its symbolic analysis once per problem);
 - the step lengths, the complementarity and the error are reductions over the processes
   (:class:`_Reductions`: a reduction to process 0 then a broadcast, so that every process takes
   the same branch with the same bits).
@@ -249,48 +248,15 @@ WORKSPACE_PERCENT = 60
 class DistributedGram:
     """``diag(d) + B̃ᵀ diag(w) B̃`` over the processes, refilled for each ``w ≥ 0`` and ``d > 0``
     and factorized by MUMPS (Cholesky): :meth:`factor` is that of
-    :class:`~qpcontact.solvers.cholesky.GramMatrix`, on the parts each process owns.
+    :class:`~qpcontact.solvers.cholesky.GramMatrix`, on the parts each process owns."""
 
-    Each process assembles the rows of the normal matrix of its own unknowns, upper triangle
-    (PETSc's MPISBAIJ), from the rows of ``B̃`` that touch them: its own, and those of other
-    processes that read its unknowns (the halo rows), which they send once per problem
-    (:func:`_halo_rows`); at each refill only the weights of the halo rows travel. The values are
-    those of a :class:`~qpcontact.solvers.cholesky.NormalPattern` of these rows (one sparse
-    product), of which this process keeps its own rows: no process forms products for another's
-    rows but where a halo row reads two other processes' unknowns, and PETSc's assembly moves
-    nothing.
-
-    Args:
-        local: this process's rows of ``B̃``, the columns numbered in the order of the
-            processes' blocks (:func:`_distributed_matrix`).
-        column_counts: (P,) the columns each process owns (:class:`Partition`).
-        comm: the mpi4py communicator.
-        family: the problem's :attr:`~qpcontact.solvers.registry.Problem.family`: the pattern
-            grows from the last one of the family, as the one-process normal matrix's does.
-    """
-
-    def __init__(self, local: sp.csr_matrix, column_counts: np.ndarray, comm: Any, family: object | None = None) -> None:
+    def __init__(self, matrix: Any) -> None:
         PETSc = petsc()
-        n = local.shape[1]
-        rank = comm.Get_rank()
-        first, owned = int(column_counts[:rank].sum()), int(column_counts[rank])
-        self._comm = comm
-        rows, self._send_rows, self._send_counts, self._receive_counts = _halo_rows(local, column_counts, comm)
-        self._pattern = _normal_pattern(rows, family)
-        keys = self._pattern.keys  # column·n + row of the lower triangle: the rows of the upper one
-        self._mine = slice(*(int(i) for i in np.searchsorted(keys, [first * n, (first + owned) * n])))
-        mine = keys[self._mine]
-        self._indptr = np.concatenate([[0], np.cumsum(np.bincount(mine // n - first, minlength=owned))]
-                                      ).astype(PETSc.IntType)
-        self._indices = (mine % n).astype(PETSc.IntType)
-        self._global_rows = np.arange(first, first + owned, dtype=PETSc.IntType)
-        self._diagonal = np.zeros(n)  # this process's part set at each refill
-        self._own_columns = slice(first, first + owned)
-        self._normal = PETSc.Mat().createSBAIJ(size=((owned, n), (owned, n)), bsize=1,
-                                               csr=(self._indptr, self._indices, np.zeros(mine.size)),
-                                               comm=_petsc_comm(comm))
-        self._normal.assemble()
-        self._ksp = PETSc.KSP().create(comm=self._normal.getComm())
+        self._B = matrix
+        self._scaled = matrix.duplicate(copy=True)
+        self._normal: Any = None
+        self._weights, self._diagonal = matrix.createVecs()[::-1]
+        self._ksp = PETSc.KSP().create(comm=matrix.getComm())
         self._ksp.setType(PETSc.KSP.Type.PREONLY)
         pc = self._ksp.getPC()
         pc.setType(PETSc.PC.Type.CHOLESKY)
@@ -300,17 +266,7 @@ class DistributedGram:
             # MUMPS's workspace beyond its estimate, in percent (its default 20 ran short,
             # INFOG(1) = -9, on 4 processes owning slabs of a 400-cell colony, 2026-12-05).
             options.setValue("mat_mumps_icntl_14", WORKSPACE_PERCENT)
-        self._x, self._b = self._normal.createVecs()
-
-    def _weights(self, w: np.ndarray) -> np.ndarray:
-        """This process's rows' weights followed by its halo rows' (from their processes)."""
-        if self._comm.Get_size() == 1:
-            return w
-        received = np.empty(int(self._receive_counts.sum()))
-        self._comm.Alltoallv([np.ascontiguousarray(w[self._send_rows]), self._send_counts],
-                             [received, self._receive_counts])
-        COUNTERS["halo_bytes"] += 8.0 * self._send_rows.size
-        return np.concatenate([w, received])
+        self._x, self._b = self._diagonal.duplicate(), self._diagonal.duplicate()
 
     def factor(self, w: np.ndarray, d: np.ndarray, extra: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
         """Factorize for these weights (this process's rows of ``w``, columns of ``d``); returns
@@ -323,13 +279,16 @@ class DistributedGram:
         """
         if extra is not None:
             raise InvalidArgumentError("curvature: the distributed interior point takes none (a first-order step)")
-        self._diagonal[self._own_columns] = d
-        values = self._pattern.values(self._weights(np.asarray(w, dtype=float)), self._diagonal)[self._mine]
-        self._normal.setValuesIJV(self._indptr, self._indices, values, rowmap=self._global_rows)
-        self._normal.assemble()
-        # After each assembly, which forgets it: MUMPS's Cholesky without pivoting (its positive
-        # definite mode; else an LDLᵀ with pivoting, 1.3× the time, measured 2026-12-05).
-        self._normal.setOption(petsc().Mat.Option.SPD, True)
+        PETSc = petsc()
+        self._B.copy(self._scaled, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self._weights.array[:] = np.sqrt(w)
+        self._scaled.diagonalScale(L=self._weights)
+        first = self._normal is None
+        self._normal = self._scaled.transposeMatMult(self._scaled, result=self._normal)
+        self._diagonal.array[:] = d
+        self._normal.setDiagonal(self._diagonal, addv=PETSc.InsertMode.ADD_VALUES)
+        if first:  # MUMPS's Cholesky without pivoting (its symmetric positive definite mode)
+            self._normal.setOption(PETSc.Mat.Option.SPD, True)
         self._ksp.setOperators(self._normal)
         cpu = time.process_time()
         self._ksp.setUp()
@@ -360,53 +319,9 @@ class DistributedGram:
 
     def destroy(self) -> None:
         """Free PETSc's objects (collective)."""
-        for obj in (self._ksp, self._normal, self._x, self._b):
-            obj.destroy()
-
-
-#: The pattern of the last distributed normal matrix and its problem's family: the next problem of
-#: the family grows its own from it (:class:`~qpcontact.solvers.cholesky.NormalPattern`). The values
-#: are the same either way (the same products summed in the same order), and MUMPS orders each
-#: problem anew, so what a run computes does not depend on it.
-_LAST: list[cholesky.NormalPattern] = []
-_LAST_FAMILY: list[object | None] = [None]
-
-
-def _normal_pattern(rows: sp.csr_matrix, family: object | None) -> cholesky.NormalPattern:
-    """The pattern of ``rowsᵀ diag(w) rows``, grown from the last one of the same family."""
-    grown_from = _LAST[0] if _LAST and family is not None and family is _LAST_FAMILY[0] else None
-    _LAST[:] = [cholesky.NormalPattern(rows, grown_from=grown_from)]
-    _LAST_FAMILY[0] = family
-    return _LAST[0]
-
-
-def _halo_rows(local: sp.csr_matrix, column_counts: np.ndarray,
-               comm: Any) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray]:
-    """The rows of ``B̃`` that touch this process's columns: ``local`` (its own rows) followed by
-    the rows of other processes that read its columns, which each sends to each process whose
-    columns it reads (collective, once per problem). Returns those rows, and for the weights of
-    each refill: this process's rows that it sends (grouped by process), how many to each
-    process, and how many it receives from each."""
-    size, rank = comm.Get_size(), comm.Get_rank()
-    none = np.zeros(size, dtype=np.int64)
-    if size == 1:
-        return local, np.zeros(0, dtype=np.int64), none, none
-    start = np.concatenate([[0], np.cumsum(column_counts)])
-    entry_owner = np.searchsorted(start, local.indices, side="right") - 1
-    entry_row = np.repeat(np.arange(local.shape[0], dtype=np.int64), np.diff(local.indptr))
-    wanted = np.unique(entry_owner.astype(np.int64) * max(local.shape[0], 1) + entry_row)
-    owner, row = wanted // max(local.shape[0], 1), wanted % max(local.shape[0], 1)
-    row, owner = row[owner != rank], owner[owner != rank]  # by process, then row (sorted keys)
-    send_counts = np.bincount(owner, minlength=size)
-    parts = np.split(row, np.cumsum(send_counts)[:-1])
-    sent = [local[part] for part in parts]
-    received = comm.alltoall([(np.diff(block.indptr), block.indices, block.data) for block in sent])
-    counts = np.concatenate([np.diff(local.indptr), *[c for c, _, _ in received]])
-    rows = sp.csr_matrix((np.concatenate([local.data, *[d for _, _, d in received]]),
-                          np.concatenate([local.indices, *[i for _, i, _ in received]]),
-                          np.concatenate([[0], np.cumsum(counts)])), shape=(counts.size, local.shape[1]))
-    COUNTERS["halo_bytes"] += 16.0 * sum(block.nnz for block in sent)
-    return rows, row, send_counts, np.array([c.size for c, _, _ in received], dtype=np.int64)
+        for obj in (self._ksp, self._normal, self._scaled, self._weights, self._diagonal, self._x, self._b):
+            if obj is not None:
+                obj.destroy()
 
 
 def _gather(part: np.ndarray, order: np.ndarray, counts: np.ndarray, comm: Any) -> np.ndarray:
@@ -421,15 +336,13 @@ def _gather(part: np.ndarray, order: np.ndarray, counts: np.ndarray, comm: Any) 
 def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.ndarray | None = None,
                                upper: np.ndarray | None = None, *, tolerance: float = 1e-4,
                                max_iterations: int | None = None, time_limit: float | None = None,
-                               comm: Any = None, owners: tuple[np.ndarray, np.ndarray] | None = None,
-                               family: object | None = None) -> IterativeSolution:
+                               comm: Any = None, owners: tuple[np.ndarray, np.ndarray] | None = None
+                               ) -> IterativeSolution:
     """:func:`qpcontact.solvers.ipm.interior_point` over the processes of ``comm`` (default
     :func:`world`): every process passes the same problem and gets the same answer (module
     docstring). ``owners``: ``(column_owner, row_owner)``, the process of each unknown and each
     row (:class:`Partition`); then a process reads only its own rows of ``matrix`` and
     ``rhs`` (the others may be left empty: the position step assembles only its own).
-    ``family``: :attr:`~qpcontact.solvers.registry.Problem.family` (the normal matrix's pattern
-    grows from the last problem's of the same family).
 
     Raises:
         InvalidArgumentError: a tolerance below :data:`~qpcontact.solvers.ipm.UNKNOWNS_ACCURACY`
@@ -448,9 +361,9 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
     lo, hi = bounds_of(lower, upper, n)
     partition = Partition(B, comm, *(owners or (None, None)))
     mine, my_rows = partition.columns(comm.Get_rank()), partition.rows(comm.Get_rank())
-    mat, local, halo = _distributed_matrix(B, partition, my_rows, comm)
+    mat, halo = _distributed_matrix(B, partition, my_rows, comm)
     reduce = _Reductions(comm)
-    normal = DistributedGram(local, partition.column_counts, comm, family)
+    normal = DistributedGram(mat)
     try:
         rows = make_rows(_Operator(mat, False, halo), _Operator(mat, True, halo), np.asarray(rhs, dtype=float)[my_rows],
                          lo[mine], hi[mine], reduce)
@@ -473,11 +386,10 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
                              time.perf_counter() - start)
 
 
-def _distributed_matrix(B: sp.csr_matrix, partition: Partition, rows: np.ndarray,
-                        comm: Any) -> tuple[Any, sp.csr_matrix, int]:
+def _distributed_matrix(B: sp.csr_matrix, partition: Partition, rows: np.ndarray, comm: Any) -> tuple[Any, int]:
     """``B̃`` as PETSc's MPIAIJ matrix: this process's ``rows``, the columns renumbered in the
-    order of the processes' blocks (collective); those rows as a SciPy matrix; and how many
-    columns of other processes its rows read (the halo of a product)."""
+    order of the processes' blocks (collective); and how many columns of other processes its rows
+    read (the halo of a product)."""
     PETSc = petsc()
     k, n = B.shape
     place = np.empty(n, dtype=np.int64)
@@ -493,7 +405,7 @@ def _distributed_matrix(B: sp.csr_matrix, partition: Partition, rows: np.ndarray
                                 csr=(local.indptr.astype(PETSc.IntType), local.indices.astype(PETSc.IntType),
                                      local.data), comm=_petsc_comm(comm))
     mat.assemble()
-    return mat, local, halo
+    return mat, halo
 
 
 def _petsc_comm(comm: Any) -> Any:
@@ -505,7 +417,7 @@ def _solve(problem: Problem, formulation: str, form: str, *, tolerance: float, t
            settings: Mapping[str, Any], initial: np.ndarray | None) -> SolverOutput:
     out = distributed_interior_point(problem.matrix, problem.rhs, problem.lower, problem.upper, tolerance=tolerance,
                                      time_limit=time_limit, max_iterations=settings.get("max_iterations"),
-                                     comm=settings.get("comm"), owners=settings.get("owners"), family=problem.family)
+                                     comm=settings.get("comm"), owners=settings.get("owners"))
     return out.output()
 
 
