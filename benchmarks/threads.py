@@ -36,8 +36,8 @@ from qpcontact.simulation.settings import Settings
 from qpcontact.simulation.steps import step_function
 factor_seconds = []
 real = cholesky.GramMatrix.factor
-def timed(self, w, d):
-    t = time.perf_counter(); out = real(self, w, d); factor_seconds.append(time.perf_counter() - t); return out
+def timed(self, *args):
+    t = time.perf_counter(); out = real(self, *args); factor_seconds.append(time.perf_counter() - t); return out
 cholesky.GramMatrix.factor = timed
 cholesky.BACKEND = sys.argv[2]
 colony, _ = load_colony(sys.argv[1])

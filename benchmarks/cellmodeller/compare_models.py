@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from qpcontact.colony.statistics import StatisticsOptions, colony_statistics, footprint
+from qpcontact.colony.statistics import colony_statistics, rim
 from qpcontact.geometry import Cells
 from qpcontact.io.snapshots import load_snapshot
 
@@ -35,11 +35,8 @@ def statistics(cells: Cells, types: np.ndarray) -> dict[str, float]:
     """The package's colony statistics of a 2D colony (``colony_statistics``), with the type-1
     fraction and the sectors at the rim (the module docstring)."""
     found = colony_statistics(cells, dimensions=2)
-    _, edge_distance = footprint(cells)
-    xy = cells.centers[:, :2]
-    offset = xy - xy.mean(axis=0)
-    rim = edge_distance < StatisticsOptions().edge_width
-    rim_types = types[rim][np.argsort(np.arctan2(offset[rim, 1], offset[rim, 0]))]
+    at_rim, polar_angle, _ = rim(cells)
+    rim_types = types[at_rim][np.argsort(polar_angle[at_rim])]
     changes = np.flatnonzero(rim_types != np.roll(rim_types, 1))
     runs = np.diff(np.concatenate([changes, [changes[0] + rim_types.size]])) if changes.size else np.array([])
     return {"cells": float(cells.n), "type1_fraction": float(np.mean(types == 1)), "packing": found.packing,

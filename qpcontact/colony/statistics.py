@@ -356,14 +356,22 @@ def local_order(xy: np.ndarray, theta: np.ndarray, radius: float) -> float:
 
 
 # -- 2D ----------------------------------------------------------------------------------------
-def _planar(cells: Cells, xy: np.ndarray, theta: np.ndarray, options: StatisticsOptions) -> dict[str, float]:
+def rim(cells: Cells, options: StatisticsOptions | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """The cells at a 2D colony's rim: (N,) whether each centre lies within ``edge_width`` of
+    its footprint's edge (:func:`footprint`; a cell at the colony's centre, which has no polar
+    angle, is not at the rim), (N,) each centre's polar angle about the centres' mean [rad],
+    and the footprint's area [length²]. The cells the edge alignment averages over."""
+    options = StatisticsOptions() if options is None else options
     area, edge_distance = footprint(cells, closing=options.closing, pixel=options.pixel,
                                     max_pixels=options.max_pixels)
+    offset = cells.centers[:, :2] - cells.centers[:, :2].mean(axis=0)
+    at_rim = (edge_distance < options.edge_width) & (np.hypot(*offset.T) > 1e-9 * float(cells.radii.max()))
+    return at_rim, np.arctan2(offset[:, 1], offset[:, 0]), area
+
+
+def _planar(cells: Cells, xy: np.ndarray, theta: np.ndarray, options: StatisticsOptions) -> dict[str, float]:
+    edge, phi, area = rim(cells, options)
     capsules = float(np.sum(np.pi * cells.radii**2 + 2.0 * cells.radii * cells.lengths))
-    offset = xy - xy.mean(axis=0)
-    phi = np.arctan2(offset[:, 1], offset[:, 0])
-    # a cell at the colony's centre has no polar angle
-    edge = (edge_distance < options.edge_width) & (np.hypot(*offset.T) > 1e-9 * float(cells.radii.max()))
     alignment = float(np.mean(np.cos(2.0 * (theta[edge] - phi[edge])))) if edge.any() else math.nan
     curve = nematic_correlation(xy, theta, options, area)
     return dict(packing=capsules / area, footprint_area=area, edge_alignment=alignment, edge_cells=float(edge.sum()),

@@ -16,9 +16,10 @@ Two factorizations (:data:`BACKEND`):
   cheaper in 2D and 3D (docs/model-notes.md, "A step that scales"). cvxopt's CHOLMOD is built
   without METIS, hence pymetis; its BLAS is the wheel's OpenBLAS, built without threads, so it uses one core.
 - ``"pardiso"`` (``pip install 'qpcontact[pardiso]'``: pypardiso and Intel's MKL, about 1 GB):
-  MKL's PARDISO, its own nested dissection and a threaded supernodal Cholesky on every core:
-  on grown colonies 2–3× faster than CHOLMOD in 2D and 3–4.5× in 3D on this project's 2 cores
-  (docs/performance.md). Used when installed.
+  MKL's PARDISO, its own nested dissection and a threaded supernodal Cholesky on every core.
+  Used when installed. Whether it pays depends on the CPU: on an Intel Xeon with 2 cores its
+  factorizations were 2–4.5× CHOLMOD's speed, on this project's AMD EPYC with 2 cores 1.2–1.5×,
+  and a whole step 0.97–1.27× (docs/performance.md, "Both cores at the accurate defaults").
 """
 
 from __future__ import annotations

@@ -18,6 +18,7 @@ from qpcontact.colony.statistics import (
     colony_statistics,
     crossing,
     footprint,
+    rim,
 )
 from qpcontact.io.snapshots import load_snapshot, save_colony
 
@@ -152,6 +153,21 @@ def test_only_the_cells_at_the_edge_count_for_its_alignment():
     s = colony_statistics(rings([*inner, (outside, 3.2, False)]))
     assert s.edge_alignment == pytest.approx(-1.0)
     assert s.edge_cells == int(2 * np.pi * outside / 3.2)
+
+
+def test_the_rim_is_the_outer_ring_with_each_cells_polar_angle():
+    """``rim``: the cells the edge alignment averages over (the outer ring of a wound colony,
+    none of the inner rings), each centre's polar angle about the centres' mean, and the
+    footprint's area (the packing's denominator)."""
+    inside = [(r, 3.2, False) for r in np.arange(2.0, 12.0, 1.1)]
+    outer = inside[-1][0] + 0.5 + 0.1 + 1.5
+    cells = rings([*inside, (outer, 1.15, True)])
+    at_rim, polar, area = rim(cells)
+    outermost = np.hypot(*cells.centers[:, :2].T) > outer - 0.01
+    assert np.array_equal(at_rim, outermost)
+    assert np.allclose(np.cos(polar[at_rim]), cells.centers[at_rim, 0] / outer, atol=1e-9)
+    assert area == pytest.approx(colony_statistics(cells).footprint_area)
+    assert area == pytest.approx(np.pi * (outer + 1.5) ** 2, rel=0.05)  # the disc out to the radial tips
 
 
 def test_the_length_distribution():
