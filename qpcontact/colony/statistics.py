@@ -362,6 +362,8 @@ def rim(cells: Cells, options: StatisticsOptions | None = None) -> tuple[np.ndar
     angle, is not at the rim), (N,) each centre's polar angle about the centres' mean [rad],
     and the footprint's area [length²]. The cells the edge alignment averages over."""
     options = StatisticsOptions() if options is None else options
+    if not isinstance(options, StatisticsOptions):
+        raise InvalidArgumentError(f"options: expected StatisticsOptions, got {type(options).__name__}")
     area, edge_distance = footprint(cells, closing=options.closing, pixel=options.pixel,
                                     max_pixels=options.max_pixels)
     offset = cells.centers[:, :2] - cells.centers[:, :2].mean(axis=0)

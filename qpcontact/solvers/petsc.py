@@ -287,7 +287,10 @@ class DistributedGram:
         self._normal = self._scaled.transposeMatMult(self._scaled, result=self._normal)
         self._diagonal.array[:] = d
         self._normal.setDiagonal(self._diagonal, addv=PETSc.InsertMode.ADD_VALUES)
-        if first:  # MUMPS's Cholesky without pivoting (its symmetric positive definite mode)
+        # MUMPS's Cholesky without pivoting (its positive definite mode) needs the option on the
+        # assembled matrix; once is enough: PETSc reads it when it makes the factor, at the first
+        # set-up of each problem (MatGetFactor for MUMPS), and later refills keep that factor.
+        if first:
             self._normal.setOption(PETSc.Mat.Option.SPD, True)
         self._ksp.setOperators(self._normal)
         cpu = time.process_time()
