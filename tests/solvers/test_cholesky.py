@@ -134,6 +134,40 @@ def test_a_matrix_grown_from_the_last_of_its_family_is_the_matrix_built_anew(mon
     assert np.allclose(grown.factor(w, d)(v), np.linalg.solve(expected, v), rtol=1e-9, atol=1e-12)
 
 
+def _with_plane_rows(matrix: sp.csr_matrix, seed: int) -> sp.csr_matrix:
+    """``matrix`` with rows of one block of three entries (a cell against a plane) between its
+    rows: rows of different lengths, interleaved."""
+    rng = np.random.default_rng(seed)
+    k, n = matrix.shape[0] // 4, matrix.shape[1]
+    columns = 3 * rng.integers(0, n // 3, size=k)[:, None] + np.arange(3)
+    plane = sp.csr_matrix((rng.standard_normal(3 * k), (np.repeat(np.arange(k), 3), columns.ravel())), shape=(k, n))
+    rows = sp.vstack([matrix, plane], format="csr")
+    return rows[rng.permutation(rows.shape[0])].tocsr()
+
+
+@pytest.mark.parametrize("metis_size", [10**9, 0], ids=["amd", "nested-dissection"])
+def test_rows_of_different_lengths_refill_and_grow_right(monkeypatch, metis_size, backend):
+    """Rows of a cell against a plane (3 entries) among contact rows (6): the refill, a refresh
+    and a matrix grown from the last all equal the sparse product."""
+    monkeypatch.setattr(cholesky, "METIS_SIZE", metis_size)
+    old, new = _grown_pair(11)
+    old, new = _with_plane_rows(old, 12), _with_plane_rows(new, 13)
+    last = GramMatrix(old)
+    last.factor(np.ones(old.shape[0]), np.ones(old.shape[1]))
+    grown = GramMatrix(new, grown_from=last)
+    assert grown.inherited
+    rng = np.random.default_rng(14)
+    refreshed = new.copy()
+    refreshed.data = rng.standard_normal(refreshed.nnz)
+    for matrix, values in ((grown, new), (grown, refreshed)):
+        assert matrix.refresh(values)
+        w, d = rng.random(new.shape[0]), 1.0 + rng.random(new.shape[1])
+        expected = (sp.diags(d) + values.T @ sp.diags(w) @ values).toarray()
+        assert np.abs(matrix.lower(w, d).toarray() - np.tril(expected)).max() < 1e-12
+        v = rng.standard_normal(new.shape[1])
+        assert np.allclose(matrix.factor(w, d)(v), np.linalg.solve(expected, v), rtol=1e-9, atol=1e-12)
+
+
 def test_a_grown_matrix_with_no_new_entries_keeps_the_last_analysis(backend):
     old = random_rows(5)
     last = GramMatrix(old)
