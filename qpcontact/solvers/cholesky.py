@@ -183,7 +183,7 @@ def _grown(old: GramMatrix, csr: sp.csr_matrix, signatures: np.ndarray, first: n
     products of the other rows are looked up, and the entries they need that ``old`` lacks are
     added to the pattern (old entries keep their order, shifted past the added ones)."""
     n, counts = csr.shape[1], np.diff(csr.indptr)
-    if old.shape[0] != n:
+    if old.shape[0] != n or old._scatter.nnz == 0:  # nothing to keep from a matrix with no products
         return None
     order = np.argsort(old._signatures, kind="stable")
     at = np.minimum(np.searchsorted(old._signatures[order], signatures), max(order.size - 1, 0))

@@ -187,3 +187,9 @@ def test_a_matrix_of_other_columns_or_mostly_new_rows_is_built_anew():
     last = GramMatrix(old)
     assert not GramMatrix(random_rows(8, n=303), grown_from=last).inherited  # other unknowns
     assert not GramMatrix(random_rows(9), grown_from=last).inherited  # other rows altogether
+    empty = GramMatrix(sp.csr_matrix((20, 300)))  # rows with no entries: no products to keep
+    rows = sp.vstack([sp.csr_matrix((20, 300)), random_rows(10, k=1)], format="csr")
+    grown = GramMatrix(rows, grown_from=empty)
+    assert not grown.inherited
+    expected = (sp.identity(300) + rows.T @ rows).toarray()
+    assert np.allclose(grown.lower(np.ones(21), np.ones(300)).toarray(), np.tril(expected))
