@@ -27,14 +27,16 @@ which is the system of :func:`qpcontact.assembly.build_system` with that right-h
 step stops when every contact meets its target to within ``overlap_tolerance`` (measured with
 the true distance at the re-detected positions, not the linearization). What keeps the
 linearizations honest is meant to change their number, not the physics (docs/model-notes.md,
-"The colony the physics makes"; a turn still on its trust region after ``trust_rounds`` more
-linearizations is kept as it is, and counted in the result's ``turn_limited``):
+"The colony the physics makes"; a turn on its trust region when the step meets the tolerance
+is kept as it is, after ``trust_rounds`` more linearizations, and counted in the result's
+``turn_limited``):
 
 - *trust regions*: in one linearization a cell's tips move by turning at most ``trust``
   diameters from where the last one left them (turns are where a linearization is poor); a cell
-  whose answer sits on its region widens it and the step takes another linearization (up to
-  ``trust_rounds`` beyond meeting the tolerance), a cell whose turn goes back against its last
-  one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
+  whose answer sits on its region widens it (the step goes on while any overlap is beyond the
+  tolerance, and up to ``trust_rounds`` linearizations beyond it: none by default, since any
+  linearization past the tolerance moves hundreds of cells as far as those few), a cell whose
+  turn goes back against its last one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
   diameters, the default until 2026-12, bent the colony);
 - *aim*: a linearization aims at a gap of ``aim`` beyond each target, room for its own error;
   contacts then rest at that gap, as if the cells were thicker, so the default is 0.001 of a
@@ -115,8 +117,8 @@ class PositionSettings:
     trust: float | None = setting(
         1.0, unit="diameters of that cell", above=0,
         help="trust region of each linearization: a cell's tips move by turning at most this much from the last "
-             "linearization's answer; an answer that sits on it is followed by another linearization, so the trust "
-             "region sets the cost of a step, not its result; none: no trust region")
+             "linearization's answer (widened for a cell whose answer sat on it, halved when its turn goes back); it "
+             "sets how many linearizations a turn takes, not the colony; none: no trust region")
     relaxation: float = setting(
         0.05, unit="fraction of the pair's diameter", above=0,
         help="overlap present at the start of the step is removed by at most this much per step")
@@ -127,9 +129,11 @@ class PositionSettings:
              "at 0.01 at 0.88, at 0 at 0.89); exactly 0 left contacts resting on their constraint, and the solver "
              "stalled in a narrow channel (docs/model-notes.md)")
     trust_rounds: int = setting(
-        2, unit="linearizations", at_least=0,
+        0, unit="linearizations", at_least=0,
         help="linearizations a step takes beyond meeting the overlap tolerance while some cell's turn sits on its "
-             "trust region (each widening that cell's region)")
+             "trust region (each widening that cell's region). 0, the default since 2026-12-05 (2 before): any "
+             "linearization past the tolerance moves hundreds of cells as far as it moves those few, and without "
+             "these rounds the colony was the same for a seventh fewer linearizations (docs/model-notes.md)")
     second_order: bool | None = setting(
         False, unit="",
         help="each linearization also holds the contacts' curvature, weighted by the impulses of the last one (the "
