@@ -470,7 +470,8 @@ def test_license_changelog_and_type_marker_ship_with_the_package():
     import tomllib
 
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())
-    assert (ROOT / "LICENSE").read_text().startswith("MIT License") and project["project"]["license"] == {"text": "MIT"}
+    assert (ROOT / "LICENSE").read_text().startswith("MIT License") and project["project"]["license"] == "MIT"
+    assert project["project"]["license-files"] == ["LICENSE"]  # the SPDX form (PEP 639)
     assert (ROOT / "CHANGELOG.md").read_text().startswith("# Changelog")
     assert (PACKAGE / "py.typed").exists()
     assert "py.typed" in project["tool"]["setuptools"]["package-data"]["qpcontact"]
