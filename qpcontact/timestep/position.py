@@ -34,9 +34,8 @@ is kept as it is, after ``trust_rounds`` more linearizations, and counted in the
 - *trust regions*: in one linearization a cell's tips move by turning at most ``trust``
   diameters from where the last one left them (turns are where a linearization is poor); a cell
   whose answer sits on its region widens it (the step goes on while any overlap is beyond the
-  tolerance, and up to ``trust_rounds`` linearizations beyond it: none by default, since any
-  linearization past the tolerance moves hundreds of cells as far as those few), a cell whose
-  turn goes back against its last one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
+  tolerance, and up to ``trust_rounds`` linearizations beyond it), a cell whose turn goes back
+  against its last one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
   diameters, the default until 2026-12, bent the colony);
 - *aim*: a linearization aims at a gap of ``aim`` beyond each target, room for its own error;
   contacts then rest at that gap, as if the cells were thicker, so the default is 0.001 of a
@@ -129,11 +128,11 @@ class PositionSettings:
              "at 0.01 at 0.88, at 0 at 0.89); exactly 0 left contacts resting on their constraint, and the solver "
              "stalled in a narrow channel (docs/model-notes.md)")
     trust_rounds: int = setting(
-        0, unit="linearizations", at_least=0,
+        2, unit="linearizations", at_least=0,
         help="linearizations a step takes beyond meeting the overlap tolerance while some cell's turn sits on its "
-             "trust region (each widening that cell's region). 0, the default since 2026-12-05 (2 before): any "
-             "linearization past the tolerance moves hundreds of cells as far as it moves those few, and without "
-             "these rounds the colony was the same for a seventh fewer linearizations (docs/model-notes.md)")
+             "trust region (each widening that cell's region). 0 grew the same colony for a seventh fewer "
+             "linearizations, but runs split over MPI processes then parted from each other far beyond rounding "
+             "(docs/model-notes.md, Trust rounds)")
     second_order: bool | None = setting(
         False, unit="",
         help="each linearization also holds the contacts' curvature, weighted by the impulses of the last one (the "
