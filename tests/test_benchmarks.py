@@ -134,6 +134,26 @@ def test_the_step_profile_writes_its_phase_table(tmp_path):
     assert len(rows) == 1 and "%" in rows[0]
 
 
+def test_the_linearization_counts_compare_variants_from_a_state(tmp_path):
+    """benchmarks/linearization_counts.py on a small grown colony: a row per variant, and every
+    solve of the variant without early solves at the one tolerance."""
+    from qpcontact.io.runs import RunFolder, latest_snapshot
+    from qpcontact.simulation import Settings, run_colony
+
+    folder = RunFolder.create(tmp_path / "run")
+    run_colony(Settings().updated({"cells": 300}), progress=False, folder=folder)
+    out = tmp_path / "counts.md"
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "linearization_counts.py"),
+                           str(latest_snapshot(tmp_path / "run")), "--steps", "2", "--variant",
+                           "strict:position_early_tolerance=none", "--variant", "defaults:", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = {line.split("|")[2].strip(): line.split("|")[3:-1] for line in out.read_text().splitlines()
+            if line.startswith("| step_")}
+    assert set(rows) == {"strict", "defaults"}
+    assert int(rows["strict"][0]) == 2 and int(rows["strict"][2]) == 0 and int(rows["strict"][3]) > 0
+
+
 def test_the_step_error_compares_one_step_with_substeps(tmp_path):
     """benchmarks/step_error.py on a small 3D biofilm: a row per scale, and at a tenth of the
     run's step one step and its substeps agree (the reference it stands on)."""

@@ -34,14 +34,19 @@ is kept as it is, after ``trust_rounds`` more linearizations, and counted in the
 - *trust regions*: in one linearization a cell's tips move by turning at most ``trust``
   diameters from where the last one left them (turns are where a linearization is poor); a cell
   whose answer sits on its region widens it (the step goes on while any overlap is beyond the
-  tolerance, and up to ``trust_rounds`` linearizations beyond it), a cell whose turn goes back
-  against its last one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
+  tolerance, and up to ``trust_rounds`` linearizations beyond it: none by default, since any
+  linearization past the tolerance moves hundreds of cells as far as those few), a cell whose
+  turn goes back against its last one halves it. There is no cap on a step's turn unless ``turn_limit`` sets one (a cap of 0.2
   diameters, the default until 2026-12, bent the colony);
 - *aim*: a linearization aims at a gap of ``aim`` beyond each target, room for its own error;
   contacts then rest at that gap, as if the cells were thicker, so the default is 0.001 of a
   diameter (not 0: contacts resting exactly on their constraint stalled the solver): contacts
   rest touching, and a linearization that left an overlap is followed by another;
 - *shrinking*: no cell gets shorter (growth can be compressed to zero, not reversed): the model.
+
+A linearization taken while some overlap is more than :data:`EARLY_EXCESS` overlap tolerances
+beyond its target is solved only to ``early_tolerance`` (its own error, the overlap it leaves, is
+larger than that solve's); the step never ends on such an answer.
 
 The bounds are on the unknowns, so only solvers taking bounds can be used (the built-in
 ``"ipm"``, or a qpsolvers backend in the primal form).
@@ -128,11 +133,11 @@ class PositionSettings:
              "at 0.01 at 0.88, at 0 at 0.89); exactly 0 left contacts resting on their constraint, and the solver "
              "stalled in a narrow channel (docs/model-notes.md)")
     trust_rounds: int = setting(
-        2, unit="linearizations", at_least=0,
+        0, unit="linearizations", at_least=0,
         help="linearizations a step takes beyond meeting the overlap tolerance while some cell's turn sits on its "
-             "trust region (each widening that cell's region). 0 grew the same colony for a seventh fewer "
-             "linearizations, but runs split over MPI processes then parted from each other far beyond rounding "
-             "(docs/model-notes.md, Trust rounds)")
+             "trust region (each widening that cell's region). 0, the default since 2026-12-06 (2 before): any "
+             "linearization past the tolerance moves hundreds of cells as far as it moves those few, and without "
+             "these rounds the colony was the same for a seventh fewer linearizations (docs/model-notes.md)")
     second_order: bool | None = setting(
         False, unit="",
         help="each linearization also holds the contacts' curvature, weighted by the impulses of the last one (the "
@@ -155,9 +160,18 @@ class PositionSettings:
              "3·10⁻⁴ of a diameter of the exact step's, at 10⁻³ within 3·10⁻³, for 13 interior-point iterations "
              "instead of 10 (a grown 2D colony of 5,000 cells; docs/model-notes.md); 10⁻³ bends the colony (local "
              "order +0.04, larger microdomains), 10⁻⁵ gives the colony of 10⁻⁴ (docs/statistics.md)")
+    early_tolerance: float | None = setting(
+        1e-2, unit="dimensionless, scaled", above=0, below=1,
+        help="the solver tolerance of a linearization taken while some overlap is more than six times "
+             "overlap_tolerance beyond its target: such a linearization is far from the step's answer, its own "
+             "error larger than a loose solve's; a step never ends on such an answer; none: every one to tolerance "
+             "(docs/model-notes.md, Early linearizations)")
 
     def __post_init__(self) -> None:
         check_fields(self)
+        if self.early_tolerance is not None and self.early_tolerance < self.tolerance:
+            raise InvalidArgumentError(f"early_tolerance: the tolerance of a step's early solves must be at least "
+                                       f"tolerance ({self.tolerance:g}); got {self.early_tolerance:g}")
         if self.second_order:  # what a second-order step needs, refused before any run starts
             if not get_solver(self.solver).curvature:
                 raise InvalidArgumentError(f"second_order: solver {self.solver!r} takes no curvature of the objective "
@@ -296,6 +310,10 @@ MAX_BACKTRACKS = 6
 #: A cell's trust region widens, linearization after linearization, to at most this many times
 #: ``PositionSettings.trust``.
 MAX_TRUST_GROWTH = 8.0
+#: A linearization taken while some overlap is more than this many overlap tolerances beyond its
+#: target is solved to ``PositionSettings.early_tolerance`` (docs/model-notes.md, "Early
+#: linearizations").
+EARLY_EXCESS = 6.0
 
 
 @dataclass
@@ -320,6 +338,7 @@ class _Progress:
     # (first order, whole), and stops there if that is within the tolerance (without it, one seed
     # of a 2D colony of 5,000 cells grew a local order of 0.81 against the reference's 0.76).
     polished: bool = False
+    loose: bool = False  # the last answer was solved to early_tolerance: the step does not end on it
 
 
 def uses_second_order(settings: PositionSettings, comm: Any = None) -> bool:
@@ -408,9 +427,10 @@ def _judge(progress: _Progress, contacts: Contacts, diameter: np.ndarray, known:
 
 
 def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np.ndarray, spec: SolverSpec,
-           form: str, settings: PositionSettings, ids: np.ndarray, times: dict[str, float], comm: Any = None) -> str:
-    """Solve one linearization's QP and take its answer into ``progress``; why not, if it was
-    not taken. An answer is taken only when its solver stands by it and it passes the acceptance
+           form: str, settings: PositionSettings, ids: np.ndarray, times: dict[str, float], tolerance: float,
+           comm: Any = None) -> str:
+    """Solve one linearization's QP to ``tolerance`` and take its answer into ``progress``; why
+    not, if it was not taken. An answer is taken only when its solver stands by it and it passes the acceptance
     checks of every answer (resolve's, with the bounds): a stalled answer within the acceptance
     limits has still moved cells of a settled layer (docs/performance.md)."""
     key_a, key_b = progress.found.keyed(ids)
@@ -422,18 +442,19 @@ def _solve(progress: _Progress, system: ContactSystem, problem: Problem, cap: np
         owner = system.split.owner
         assert owner is not None
         options["owners"] = (owner[system.column_cell], owner[system.contacts.cell_a])
-    out = solve(problem, settings.solver, "complementarity", form, tolerance=settings.tolerance, initial=initial,
+    out = solve(problem, settings.solver, "complementarity", form, tolerance=tolerance, initial=initial,
                 settings=options)
     times["solve"] += time.perf_counter() - t0
     times["solve_cpu"] += time.process_time() - c0
     progress.solver_iterations += out.iterations or 0
     refused = "" if out.y is None or not out.found else acceptance_failure(
-        system, "complementarity", out.y, out.lam, settings.tolerance, problem.lower, problem.upper,
+        system, "complementarity", out.y, out.lam, tolerance, problem.lower, problem.upper,
         None if problem.curvature is None else problem.gradient(out.y))
     if not out.found or out.y is None or not np.all(np.isfinite(out.y)) or refused:
         return f"{out.status} {out.error or ''} {refused}".strip()
     lam = system.to_contact_impulses(out.lam) if out.lam is not None else np.zeros(problem.matrix.shape[0])
     progress.last = ContactImpulses(key_a, key_b, progress.found.kind.copy(), lam)
+    progress.loose = tolerance > settings.tolerance
     progress.turn_limited, trusting = _turn_limited(system, problem, cap, out.y)
     progress.previous = progress.impulses
     progress.impulses = progress.impulses + progress.relaxation * (system.to_impulses(out.y) - progress.impulses)
@@ -550,8 +571,10 @@ def position_step(
         step.times["assemble_cpu"] += time.process_time() - c0
         if linear is None:  # nothing asks for a push: the free motion is the answer
             progress.impulses, progress.last, progress.trusting = np.zeros((cells.n, 7)), ContactImpulses.empty(), 0
+            progress.loose = False
             continue
-        message = _solve(progress, *linear, spec, step.form, settings, ids, step.times, comm)
+        message = _solve(progress, *linear, spec, step.form, settings, ids, step.times, _tolerance(excess, settings),
+                         comm)
         if message:
             message = f"{settings.solver} failed at linearization {iteration}: {message}"
             break
@@ -631,9 +654,12 @@ def _look(step: _Step, progress: _Progress, iteration: int) -> tuple[Cells, Cont
 def _verdict(progress: _Progress, excess: float, iteration: int, settings: PositionSettings) -> tuple[bool, str]:
     """Whether the step is done at this iterate: ``(converged, why it failed)``. The free motion
     itself may be within the tolerance (nothing pushes: nothing to solve, and a solve would be
-    ill-posed, its right-hand side ~0); a cell whose turn sat on its trust region would have
-    turned further: up to ``trust_rounds`` more linearizations."""
+    ill-posed, its right-hand side ~0); not on an answer solved only to ``early_tolerance``; a
+    cell whose turn sat on its trust region would have turned further: up to ``trust_rounds``
+    more linearizations."""
     if excess <= settings.overlap_tolerance:
+        if progress.loose and iteration < settings.max_iterations:
+            return False, ""  # a step ends on an answer solved to its tolerance
         if progress.trusting == 0 or progress.trust_rounds >= settings.trust_rounds:
             return True, ""
         progress.trust_rounds += 1
@@ -644,6 +670,14 @@ def _verdict(progress: _Progress, excess: float, iteration: int, settings: Posit
                        f"linearizations (tolerance {settings.overlap_tolerance:g})")
     return False, (f"{progress.trusting} cells still turning at the trust region's edge after {iteration} "
                    f"linearizations (trust {settings.trust:g} diameters)")
+
+
+def _tolerance(excess: float, settings: PositionSettings) -> float:
+    """The solver tolerance of a linearization taken at an iterate whose largest overlap beyond
+    its target is ``excess`` [diameters]: ``early_tolerance`` while that is more than
+    :data:`EARLY_EXCESS` overlap tolerances."""
+    early = settings.early_tolerance is not None and excess > EARLY_EXCESS * settings.overlap_tolerance
+    return settings.early_tolerance if early and settings.early_tolerance is not None else settings.tolerance
 
 
 def what_to_try(settings: PositionSettings) -> str:

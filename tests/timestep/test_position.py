@@ -185,6 +185,8 @@ def test_settings_and_arguments_are_checked():
         PositionSettings(trust=0.0)
     with pytest.raises(InvalidArgumentError, match="aim: expected a number >= 0"):
         PositionSettings(aim=-0.1)
+    with pytest.raises(InvalidArgumentError, match="early_tolerance: .* at least tolerance"):
+        PositionSettings(early_tolerance=1e-5)
     cells = rods([[0, 0, 0]], [[1, 0, 0]], 2.0)
     with pytest.raises(InvalidArgumentError, match="dt"):
         position_step(cells, -1.0)
@@ -513,3 +515,33 @@ def test_a_second_order_step_meets_the_overlap_tolerance_in_fewer_linearizations
     assert not np.array_equal(second.colony.cells.centers, first.colony.cells.centers)
     with pytest.raises(InvalidArgumentError, match="second_order"):
         position_step(colony.cells, dt, planar=True, settings=PositionSettings(second_order=True, solver="mprgp"))
+
+
+def test_early_linearizations_are_solved_loosely_and_a_step_never_ends_on_one(monkeypatch):
+    """PositionSettings.early_tolerance: a linearization taken while some overlap is more than
+    six overlap tolerances beyond its target is solved to early_tolerance, the step's last one
+    to tolerance, and the step takes fewer interior-point iterations than with every solve to
+    tolerance (docs/model-notes.md, "Early linearizations")."""
+    import qpcontact.timestep.position as position
+    from qpcontact.simulation import Settings, run_colony
+    from qpcontact.simulation.steps import step_function
+
+    settings = Settings().updated({"cells": 400, "dimensions": 2}, "test")
+    colony = run_colony(settings, progress=False).colony
+    dt = settings.time_step_of(colony)
+    asked: list[float] = []
+    solve = position.solve
+
+    def recorded(*args, tolerance, **kwargs):
+        asked.append(tolerance)
+        return solve(*args, tolerance=tolerance, **kwargs)
+
+    monkeypatch.setattr(position, "solve", recorded)
+    early = step_function(settings, {})(colony, dt)
+    assert early.result.converged and early.rejected == 0
+    assert settings.position.early_tolerance in asked and asked[-1] == settings.position.tolerance
+    assert early.result.max_overlap <= settings.position.overlap_tolerance
+    asked.clear()
+    strict = step_function(settings.updated({"position_early_tolerance": None}, "test"), {})(colony, dt)
+    assert set(asked) == {settings.position.tolerance}
+    assert early.result.solver_iterations < strict.result.solver_iterations
