@@ -84,7 +84,7 @@ if hasattr(cholesky.GramMatrix, "_call"):
 colony, _ = load_colony(sys.argv[1])
 steps = int(sys.argv[2])
 three_d = bool(np.any(colony.cells.centers[:, 2] != 0))
-settings = Settings().updated({"dimensions": 3 if three_d else 2}, "profile-step")
+settings = Settings().updated({"dimensions": 3 if three_d else 2, **json.loads(sys.argv[3])}, "profile-step")
 extra = {}
 take_step = step_function(settings, extra)
 
@@ -119,10 +119,10 @@ PHASES = (("factorization", "factor"), ("solves", "solve"), ("set-up", "setup"),
           ("vector work", None), ("detection", "detect"), ("assembly", "assemble"), ("other", None))
 
 
-def profile(state: Path, steps: int) -> dict:
-    """One child process: the rows of its timed steps."""
-    done = subprocess.run([sys.executable, "-c", CHILD, str(state), str(steps)], capture_output=True, text=True,
-                          check=False)
+def profile(state: Path, steps: int, changes: dict | None = None) -> dict:
+    """One child process: the rows of its timed steps, with ``changes`` to the run's settings."""
+    done = subprocess.run([sys.executable, "-c", CHILD, str(state), str(steps), json.dumps(changes or {})],
+                          capture_output=True, text=True, check=False)
     if done.returncode != 0:
         raise SystemExit(f"profile of {state} failed:\n{done.stderr[-3000:]}")
     return json.loads(done.stdout.strip().splitlines()[-1])
@@ -172,7 +172,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=3, help="steps timed per state, median kept (default: 3)")
     parser.add_argument("--out", type=Path, default=Path("profile-step.md"),
                         help="the Markdown table written (default: ./profile-step.md)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=JSON",
+                        help="a change to the run's settings, e.g. position_early_tolerance=null (repeatable)")
     args = parser.parse_args(argv)
+    try:
+        changes = {name: json.loads(value) for name, _, value in (item.partition("=") for item in args.set)}
+    except json.JSONDecodeError as error:
+        parser.error(f"--set: expected NAME=JSON: {error}")
     if args.steps < 1:
         parser.error("--steps: expected an integer >= 1")
     for state in args.states:
@@ -182,11 +188,11 @@ def main(argv: list[str] | None = None) -> None:
     results = {}
     for state in args.states:
         t = time.perf_counter()
-        result = profile(state, args.steps)
+        result = profile(state, args.steps, changes)
         results[state.name] = result
         print(f"{state.name}: {time.perf_counter() - t:.0f} s", file=sys.stderr)
     text = (f"# One position step, phase by phase\n\n{started}, qpcontact {version()}, "
-            f"{measured_on} at the start, "
+            f"{measured_on} at the start, settings changed: {changes or 'none'}, "
             f"factorization {results[next(iter(results))]['rows'][0]['backend']}; "
             f"median of {args.steps} steps per state, each from the last (seconds, share of the step).\n\n"
             + table(results) + "\n")

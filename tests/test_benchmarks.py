@@ -128,10 +128,12 @@ def test_the_step_profile_writes_its_phase_table(tmp_path):
     run_colony(Settings().updated({"cells": 150}), progress=False, folder=folder)
     out = tmp_path / "profile.md"
     done = subprocess.run([sys.executable, str(BENCHMARKS / "profile_step.py"), str(latest_snapshot(tmp_path / "run")),
-                           "--steps", "1", "--out", str(out)], capture_output=True, text=True, timeout=300)
+                           "--steps", "1", "--set", "position_early_tolerance=null", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     rows = [line for line in out.read_text().splitlines() if line.startswith("| step_")]
     assert len(rows) == 1 and "%" in rows[0]
+    assert "settings changed: {'position_early_tolerance': None}" in out.read_text()
 
 
 def test_the_linearization_counts_compare_variants_from_a_state(tmp_path):

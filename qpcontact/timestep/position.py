@@ -676,8 +676,8 @@ def _tolerance(excess: float, settings: PositionSettings) -> float:
     """The solver tolerance of a linearization taken at an iterate whose largest overlap beyond
     its target is ``excess`` [diameters]: ``early_tolerance`` while that is more than
     :data:`EARLY_EXCESS` overlap tolerances."""
-    early = settings.early_tolerance is not None and excess > EARLY_EXCESS * settings.overlap_tolerance
-    return settings.early_tolerance if early and settings.early_tolerance is not None else settings.tolerance
+    early = settings.early_tolerance
+    return early if early is not None and excess > EARLY_EXCESS * settings.overlap_tolerance else settings.tolerance
 
 
 def what_to_try(settings: PositionSettings) -> str:
