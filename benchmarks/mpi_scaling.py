@@ -1,7 +1,7 @@
 """One colony over MPI processes, measured per process: CPU seconds of each phase, MUMPS's flops and
 factor, bytes sent, peak memory, at P = 1, 2, 4, 8, and agreement with one process.
 
-    python benchmarks/mpi_scaling.py --states DIR [--steps 2] [--processes 1,2,4,8] [--folder OUT]
+    python benchmarks/mpi_scaling.py --states DIR [--steps 2] [--processes 1,2,4,8] [--folder OUT] [--profile]
 
 Run with the distributed stack's Python (``scripts/install-mpi VENV``; ``VENV/bin/python``). DIR holds
 grown colonies as ``qpcontact bench-grown`` caches them (``--names``, default ``2d-20000`` and
@@ -16,6 +16,11 @@ step function (``simulate``'s), each from the last; every process reports its ow
 - the bytes it sent (qpcontact's collectives, the halo of the products with ``B̃``, the gathered
   answer);
 - its peak resident memory (``ru_maxrss``);
+- *counts*, the inputs of ``benchmarks/mpi_model.py``: the number and CPU seconds of its
+  collectives, of MUMPS's triangular solves, of the products with ``B̃`` and of the normal matrix, the factorizations
+  and the first of each problem (its analysis), the factor entries its solves read, the rows and
+  unknowns it owns times the iterations, and its own work (the step's CPU seconds less all of
+  those, each of which includes waiting for other processes);
 - *agreement*: the end positions on P processes against one process's, in diameters, and the ids;
 - *alike runs* (``--grow N``): whole 2D runs from one cell to N cells in one process and on two.
 
@@ -42,14 +47,14 @@ sys.path.insert(0, str(Path(__file__).parent))
 from profile_step import version  # noqa: E402  (the commit of the qpcontact the children import)
 
 CHILD = r"""
-import json, resource, sys, time
+import cProfile, io, json, pstats, resource, sys, time
 import numpy as np
 from qpcontact.geometry import regions
 from qpcontact.io import load_colony
 from qpcontact.simulation import Settings
 from qpcontact.simulation.steps import sink_drive, step_function
 
-state, steps, how, ends = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+state, steps, how, ends, profile_to = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4], sys.argv[5]
 solver = "ipm" if how == "ipm" else "ipm-petsc"
 comm = petsc = None
 if solver == "ipm-petsc":
@@ -63,24 +68,44 @@ take_step = step_function(settings, {}, comm)
 
 colony = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony)).colony
 rows = []
+profiler = cProfile.Profile() if profile_to and (comm is None or comm.Get_rank() == 0) else None
+if profiler is not None:
+    profiler.enable()
 for _ in range(steps):
     if comm is not None:
         comm.Barrier()
         petsc.reset_counters()
-    regions.SENT["bytes"] = 0
+    regions.SENT.update(bytes=0, collectives=0, collective_cpu=0.0)
     t, cpu = time.perf_counter(), time.process_time()
     outcome = take_step(colony, settings.time_step_of(colony), drive=sink_drive(settings, colony))
     total, total_cpu = time.perf_counter() - t, time.process_time() - cpu
     times, counters = outcome.result.times, dict(petsc.COUNTERS) if petsc else {}
     sent = regions.SENT["bytes"] + counters.get("halo_bytes", 0.0) + counters.get("gathered_bytes", 0.0)
+    nan = float("nan")
+    counts = {key: counters.get(key, nan) for key in ("first_factor_cpu", "problems", "factorizations", "normal_cpu",
+                                                       "entry_solves",
+                                                       "solves", "solve_cpu", "products", "product_cpu",
+                                                       "owned_iterations")}
+    collective_cpu = regions.SENT["collective_cpu"] + counters.get("collective_cpu", 0.0)
+    # this process's own work: what is left when the factorizations, the triangular solves, the
+    # products with B̃, the normal matrix and the collectives (each with its waiting) are taken out
+    own = total_cpu - collective_cpu - sum(counters.get(k, 0.0) for k in ("factor_cpu", "solve_cpu", "product_cpu",
+                                                                          "normal_cpu"))
     rows.append(dict(cells=colony.cells.n, total=total, cpu=total_cpu, detect=times["detect_cpu"],
                      assemble=times["assemble_cpu"], solve=times["solve_cpu"],
                      factor=counters.get("factor_cpu", float("nan")), flops=counters.get("factor_flops", float("nan")),
                      entries=counters.get("factor_entries", float("nan")),
-                     mumps_mb=counters.get("factor_memory_mb", float("nan")), sent=sent,
+                     mumps_mb=counters.get("factor_memory_mb", float("nan")), sent=sent, own=own,
+                     collective_cpu=collective_cpu,
+                     collectives=regions.SENT["collectives"] + counters.get("collectives", 0.0), **counts,
                      linearizations=outcome.result.iterations, solver_iterations=outcome.result.solver_iterations,
                      max_overlap=outcome.result.max_overlap))
     colony = outcome.colony
+if profiler is not None:
+    profiler.disable()
+    text = io.StringIO()
+    pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(40)
+    open(profile_to, "w").write(text.getvalue())
 memory = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # MiB
 mine = dict(rows=rows, memory=memory)
 every = [mine] if comm is None else comm.gather(mine, root=0)
@@ -100,9 +125,10 @@ def environment() -> dict[str, str]:
     return env
 
 
-def measure(state: Path, steps: int, solver: str, processes: int, ends: Path) -> list[dict]:
-    """One child: each process's timed steps and peak memory, in the order of the processes."""
-    command = [sys.executable, "-c", CHILD, str(state), str(steps), solver, str(ends)]
+def measure(state: Path, steps: int, solver: str, processes: int, ends: Path, profile: Path | None = None) -> list[dict]:
+    """One child: each process's timed steps and peak memory, in the order of the processes;
+    with ``profile``, process 0's timed steps profiled (cProfile, written there)."""
+    command = [sys.executable, "-c", CHILD, str(state), str(steps), solver, str(ends), str(profile or "")]
     if solver != "ipm":
         command = ["mpiexec", "-n", str(processes), *command]
     done = subprocess.run(command, capture_output=True, text=True, check=False, env=environment())
@@ -184,6 +210,23 @@ def row(name: str, label: str, values: dict[str, list[float]], cells: int, refer
             f"{median(values['linearizations']):g} | {max(values['max_overlap']):.4f} |")
 
 
+COUNTS = ("| state | run on | own work CPU s, largest (summed) | collectives: number, CPU s | triangular solves: "
+          "number, CPU s | products with B̃: number, CPU s | normal matrix CPU s | factorizations: number (problems), CPU s of the first "
+          "of each problem | factor entries read by the solves [10⁹] | owned rows and unknowns × iterations [10⁶] |",
+          "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+
+
+def counts_row(name: str, label: str, values: dict[str, list[float]]) -> str:
+    """One line of the table of counts: each the largest over the processes (the own work's sum too)."""
+    big = lambda k: max(values[k])  # noqa: E731
+    if big("solves") != big("solves"):  # one process with ipm: no MPI, no MUMPS
+        return f"| {name} | {label} | {big('own'):.2f} ({sum(values['own']):.2f}) | – | – | – | – | – | – | – |"
+    return (f"| {name} | {label} | {big('own'):.2f} ({sum(values['own']):.2f}) | {big('collectives'):.0f}, "
+            f"{big('collective_cpu'):.2f} | {big('solves'):.0f}, {big('solve_cpu'):.2f} | {big('products'):.0f}, "
+            f"{big('product_cpu'):.2f} | {big('normal_cpu'):.2f} | {big('factorizations'):.0f} ({big('problems'):.0f}), "
+            f"{big('first_factor_cpu'):.2f} | {big('entry_solves') / 1e9:.2f} | {big('owned_iterations') / 1e6:.2f} |")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     parser.add_argument("--states", type=Path, required=True, help="folder of grown colonies (bench-grown's cache)")
@@ -196,6 +239,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--grow", type=int, default=0,
                         help="also grow a 2D colony from one cell to this many cells in one process and on two, "
                              "and compare the runs (default: 0, not run)")
+    parser.add_argument("--profile", action="store_true",
+                        help="profile process 0's timed steps (cProfile; its times are then inflated) and write the 40 "
+                             "functions of most own time of each run beside the table, profile-NAME-P.txt")
     parser.add_argument("--folder", type=Path, default=Path("mpi-scaling"),
                         help="where the table (mpi-scaling.md) and every process's numbers (mpi-scaling.json) are "
                              "written (default: ./mpi-scaling)")
@@ -221,6 +267,10 @@ def main(argv: list[str] | None = None) -> None:
              "MB sent: what qpcontact's collectives send plus the halo of the products with B̃ and the gathered "
              "answer (MUMPS's own messages not counted); memory: peak resident set (ru_maxrss).\n", *HEADER]
     raw: dict[str, dict] = {}
+    counted = ["\nCounts per process, the same runs (benchmarks/mpi_model.py builds its model from them). Own work: "
+               "the CPU seconds of the step less those of the factorizations, the triangular solves, the products "
+               "with B̃, the normal matrix and the collectives, each of which includes its waiting; what is left is work no process "
+               "waits in.\n", *COUNTS]
     for name in args.names.split(","):
         state = args.states / f"{name}.npz"
         if not state.is_file():
@@ -231,14 +281,17 @@ def main(argv: list[str] | None = None) -> None:
                                          *((f"{p} MPI process{'es' if p > 1 else ''}, ipm-petsc", "ipm-petsc", p)
                                            for p in counts)]:
             t = time.perf_counter()
-            result = measure(state, args.steps, solver, processes, scratch / f"{name}-{solver}-{processes}.npz")
+            profile = args.folder / f"profile-{name}-{solver}-{processes}.txt" if args.profile else None
+            result = measure(state, args.steps, solver, processes, scratch / f"{name}-{solver}-{processes}.npz", profile)
             values = per_process(result)
             values["cells"] = [float(result[0]["rows"][0]["cells"])]
             if solver == "ipm-petsc" and processes == 1:
                 reference = values["other"][0]
             raw[f"{name}, {label}"] = values
             lines.append(row(name, label, values, int(result[0]["rows"][0]["cells"]), reference))
+            counted.append(counts_row(name, label, values))
             print(lines[-1], f"({time.perf_counter() - t:.0f} s)", file=sys.stderr)
+    lines += counted
     agreement = []
     for name in args.names.split(","):
         state = args.states / f"{name}.npz"

@@ -207,3 +207,53 @@ def test_the_error_against_time_table_puts_each_simulator_against_its_own_finest
     # the same state at both steps: no error; the finest step's own row has none to show
     assert "Δ+0.000" in rows[1] and "Δ" not in rows[0] and "Δ" not in rows[2]
     assert (tmp_path / "plot.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _process_counts(processes: int, own: float) -> dict[str, list[float]]:
+    """A made-up ``mpi-scaling.json`` run on ``processes``: MUMPS's work divided evenly, ``own``
+    CPU seconds of own work on each process."""
+    each = lambda value: [value / processes] * processes  # noqa: E731
+    return {"cells": [10_000.0], "own": [own] * processes, "factor": each(12.0), "first_factor_cpu": each(3.0),
+            "problems": [10.0] * processes, "factorizations": [100.0] * processes, "solve_cpu": each(4.0),
+            "product_cpu": each(1.0), "normal_cpu": each(2.0), "flops": each(5e11), "entry_solves": each(4e9), "solves": [400.0] * processes,
+            "products": [1000.0] * processes, "collectives": [3000.0] * processes, "sent": each(1e8),
+            "linearizations": [5.0] * processes}
+
+
+def test_the_distributed_model_is_built_from_counts_not_from_waiting(tmp_path):
+    """benchmarks/mpi_model.py on made-up counts: the own work's repeated part is what does not fall
+    with P, the analysis stays on one process, the factorization divides, and a larger colony costs
+    more."""
+    import json
+
+    sys.path.insert(0, str(BENCHMARKS))
+    import mpi_model
+
+    runs = {p: _process_counts(p, 1.0 + 8.0 / p) for p in (1, 2, 4, 8)}  # own work: 1 repeated, 8 divided
+    counts = mpi_model.counts_of(runs)
+    assert counts.repeated == pytest.approx(1.0) and counts.divided == pytest.approx(8.0)
+    # the first factorization of each of 10 problems took 3 s in all, a numeric one (12 - 3) / 90 s
+    assert counts.analysis == pytest.approx(3.0 - 10 * 0.1) and counts.numeric == pytest.approx(10.0)
+    flops, entries = mpi_model.growths(2, None, counts.cells)
+    parts = {p: mpi_model.step_parts(counts, 1e6, p, 2e-6, 25e9, flops, entries) for p in (64.0, 256.0)}
+    assert parts[64.0]["analysis (one process)"] == parts[256.0]["analysis (one process)"] == pytest.approx(200.0)
+    assert parts[64.0]["numeric factorization"] == pytest.approx(4 * parts[256.0]["numeric factorization"])
+    assert parts[64.0]["numeric factorization"] == pytest.approx(10.0 * 100 ** 1.5 / 64)
+    assert parts[256.0]["own, repeated"] == pytest.approx(100.0)
+    assert parts[256.0]["normal matrix"] == pytest.approx(2.0 * 100 / 256 + 100 * 2 * 2e-6)
+    measured = tmp_path / "mpi-scaling.json"
+    measured.write_text(json.dumps({"per_process": {f"2d-10000, {p} MPI processes, ipm-petsc": v
+                                                    for p, v in runs.items()}}))
+    out = tmp_path / "model.md"
+    done = subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
+                           "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = [line.split("|")[1:-1] for line in out.read_text().splitlines() if line.startswith("| 64 ")
+            or line.startswith("| 256 ")]
+    assert len(rows) == 2 and float(rows[1][-2]) < float(rows[0][-2])  # a step on 256 is shorter than on 64
+    # a step of twice the linearizations costs twice as much
+    again = tmp_path / "model-10.md"
+    subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
+                    "--linearizations", "10", "--out", str(again)], check=True, capture_output=True, timeout=120)
+    twice = [line.split("|")[1:-1] for line in again.read_text().splitlines() if line.startswith("| 64 ")]
+    assert float(twice[0][-2]) == pytest.approx(2 * float(rows[0][-2]), rel=1e-3)

@@ -14,6 +14,9 @@ gives. The narrow phase and the evaluation of the contacts are shared by contigu
 
 from __future__ import annotations
 
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -63,9 +66,22 @@ def region_pairs(cells: Cells, margin: float, slack: np.ndarray | None, rank: in
     return found[own[found[:, 0]]]
 
 
-#: Bytes this process has sent through :class:`Split`'s collectives since the counter was last
-#: set to 0 (each part counted once, as it leaves; what MPI forwards inside a collective is not).
-SENT = {"bytes": 0}
+#: What :class:`Split`'s collectives cost this process since the counters were last set to 0:
+#: the bytes it sent (each part counted once, as it leaves; what MPI forwards inside a collective
+#: is not), how many it took part in, and the CPU seconds inside them (``time.process_time``,
+#: waiting for the other processes included: what is not this process's own work).
+SENT: dict[str, float] = {"bytes": 0, "collectives": 0, "collective_cpu": 0.0}
+
+
+@contextmanager
+def _collective() -> Iterator[None]:
+    """Count a collective in :data:`SENT`, with the CPU seconds spent in it."""
+    cpu = time.process_time()
+    try:
+        yield
+    finally:
+        SENT["collectives"] += 1
+        SENT["collective_cpu"] += time.process_time() - cpu
 
 
 def _nbytes(part: Any) -> int:
@@ -104,7 +120,8 @@ class Split:
 
         ops = {"total": MPI.SUM, "most": MPI.MAX}
         SENT["bytes"] += 16
-        return float(self.comm.bcast(self.comm.reduce(float(value), op=ops[op], root=0), root=0))
+        with _collective():
+            return float(self.comm.bcast(self.comm.reduce(float(value), op=ops[op], root=0), root=0))
 
     def total(self, value: float) -> float:
         """The sum of ``value`` over the processes, the same bits in each."""
@@ -123,8 +140,9 @@ class Split:
 
         vector = np.ascontiguousarray(vector, dtype=float)
         out = np.empty_like(vector)
-        self.comm.Reduce(vector, out, op=MPI.SUM, root=0)
-        self.comm.Bcast(out, root=0)
+        with _collective():
+            self.comm.Reduce(vector, out, op=MPI.SUM, root=0)
+            self.comm.Bcast(out, root=0)
         SENT["bytes"] += vector.nbytes * (2 if self.rank == 0 else 1)
         return out
 
@@ -163,7 +181,8 @@ class Split:
                                                  "shrink beyond what a step allows (its message is that process's)")
         counts = np.bincount(self.owner, minlength=self.size) * 7
         whole = np.empty(cells.n * 7)
-        self.comm.Allgatherv(np.ascontiguousarray(local).ravel(), [whole, counts])
+        with _collective():
+            self.comm.Allgatherv(np.ascontiguousarray(local).ravel(), [whole, counts])
         SENT["bytes"] += local.nbytes
         out = np.empty((cells.n, 7))
         out[np.argsort(self.owner, kind="stable")] = whole.reshape(-1, 7)
@@ -175,7 +194,8 @@ class Split:
         if self.size == 1:
             return [part]
         SENT["bytes"] += _nbytes(part)
-        return list(self.comm.allgather(part))
+        with _collective():
+            return list(self.comm.allgather(part))
 
 
 #: One process on its own.

@@ -120,19 +120,51 @@ def world() -> Any:
 
 
 #: What this process's distributed solves did since the counters were last reset
-#: (:func:`reset_counters`): CPU seconds of the factorizations (MUMPS's analysis and numeric
-#: factorization, ``time.process_time``), MUMPS's floating-point operations of elimination on this
-#: process (RINFO(3), summed), the entries of its last factor on this process (INFO(9)), its largest
-#: working memory on this process [MB] (INFO(16)), the products with ``B̃`` and the bytes of unknowns
-#: this process sent to its neighbours for them (the halo of PETSc's scatter, counted from the
-#: columns its rows read from other processes: each product sends as many as it receives, on average).
+#: (:func:`reset_counters`), the counts a model of many processes is built from
+#: (``benchmarks/mpi_model.py``); CPU seconds are ``time.process_time``, waiting in MPI included:
+#:
+#: - ``factor_cpu``: the factorizations (MUMPS's analysis and numeric factorization);
+#:   ``first_factor_cpu`` the first of each problem (its analysis and one numeric factorization),
+#:   ``problems`` and ``factorizations`` their numbers;
+#: - ``factor_flops``: MUMPS's floating-point operations of elimination on this process (RINFO(3),
+#:   summed); ``factor_entries`` the entries of its last factor on this process (INFO(9));
+#:   ``entry_solves`` the factor entries on this process summed over the triangular solves (each
+#:   solve reads each entry twice, forward and back); ``factor_memory_mb`` its largest working
+#:   memory on this process (INFO(16));
+#: - ``solves`` and ``solve_cpu``: MUMPS's triangular solves; ``normal_cpu`` the refills of the
+#:   normal matrix (PETSc's product of the row-scaled ``B̃`` with itself), one a factorization;
+#: - ``products`` and ``product_cpu``: the products with ``B̃`` and ``B̃ᵀ``; ``halo_bytes`` the
+#:   bytes of unknowns this process sent to its neighbours for them (the halo of PETSc's scatter,
+#:   counted from the columns its rows read from other processes: each product sends as many as
+#:   it receives, on average);
+#: - ``collectives`` and ``collective_cpu``: the solver's own reductions and gathers (the step
+#:   lengths, the error, the answer); ``gathered_bytes`` what this process sent of the answer;
+#: - ``owned_iterations``: the rows and unknowns this process owns, summed over the interior-point
+#:   iterations (its share of the vector work).
 COUNTERS: dict[str, float] = {}
 
 
 def reset_counters() -> None:
     """Set :data:`COUNTERS` to zero."""
-    COUNTERS.update(factor_cpu=0.0, factor_flops=0.0, factor_entries=0.0, factor_memory_mb=0.0, products=0.0,
-                    halo_bytes=0.0, gathered_bytes=0.0, parallel_analysis=0.0)
+    COUNTERS.update({key: 0.0 for key in (
+        "factor_cpu", "first_factor_cpu", "problems", "factorizations", "normal_cpu", "factor_flops", "factor_entries",
+        "entry_solves", "factor_memory_mb", "solves", "solve_cpu", "products", "product_cpu", "halo_bytes",
+        "collectives", "collective_cpu", "gathered_bytes", "owned_iterations", "parallel_analysis")})
+
+
+class _Counted:
+    """Adds the CPU seconds of a ``with`` block to ``COUNTERS[key + "_cpu"]`` and one to
+    ``COUNTERS[count]``."""
+
+    def __init__(self, key: str, count: str) -> None:
+        self.key, self.count = key, count
+
+    def __enter__(self) -> None:
+        self._cpu = time.process_time()
+
+    def __exit__(self, *_: object) -> None:
+        COUNTERS[self.key + "_cpu"] += time.process_time() - self._cpu
+        COUNTERS[self.count] += 1
 
 
 reset_counters()
@@ -148,7 +180,8 @@ class _Reductions(Reductions):
         self.comm, self._ops = comm, {"total": MPI.SUM, "least": MPI.MIN, "most": MPI.MAX}
 
     def _all(self, value: float, op: str) -> float:
-        return float(self.comm.bcast(self.comm.reduce(float(value), op=self._ops[op], root=0), root=0))
+        with _Counted("collective", "collectives"):
+            return float(self.comm.bcast(self.comm.reduce(float(value), op=self._ops[op], root=0), root=0))
 
     def total(self, value: float) -> float:
         return self._all(value, "total")
@@ -234,11 +267,11 @@ class _Operator:
         self.shape = (self._out.getLocalSize(), self._in.getLocalSize())
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
-        COUNTERS["products"] += 1
         COUNTERS["halo_bytes"] += 8 * self.halo
-        self._in.array[:] = x
-        (self.matrix.multTranspose if self.transpose else self.matrix.mult)(self._in, self._out)
-        return self._out.array.copy()
+        with _Counted("product", "products"):
+            self._in.array[:] = x
+            (self.matrix.multTranspose if self.transpose else self.matrix.mult)(self._in, self._out)
+            return self._out.array.copy()
 
 
 #: MUMPS's ICNTL(14) unless the user sets it (PETSc's option ``-mat_mumps_icntl_14``).
@@ -280,6 +313,7 @@ class DistributedGram:
         if extra is not None:
             raise InvalidArgumentError("curvature: the distributed interior point takes none (a first-order step)")
         PETSc = petsc()
+        cpu = time.process_time()
         self._B.copy(self._scaled, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self._weights.array[:] = np.sqrt(w)
         self._scaled.diagonalScale(L=self._weights)
@@ -287,6 +321,7 @@ class DistributedGram:
         self._normal = self._scaled.transposeMatMult(self._scaled, result=self._normal)
         self._diagonal.array[:] = d
         self._normal.setDiagonal(self._diagonal, addv=PETSc.InsertMode.ADD_VALUES)
+        COUNTERS["normal_cpu"] += time.process_time() - cpu
         # MUMPS's Cholesky without pivoting (its positive definite mode) needs the option on the
         # assembled matrix; once is enough: PETSc reads it when it makes the factor, at the first
         # set-up of each problem (MatGetFactor for MUMPS), and later refills keep that factor.
@@ -295,7 +330,12 @@ class DistributedGram:
         self._ksp.setOperators(self._normal)
         cpu = time.process_time()
         self._ksp.setUp()
-        COUNTERS["factor_cpu"] += time.process_time() - cpu
+        spent = time.process_time() - cpu
+        COUNTERS["factor_cpu"] += spent
+        COUNTERS["factorizations"] += 1
+        if first:
+            COUNTERS["first_factor_cpu"] += spent
+            COUNTERS["problems"] += 1
         factor = self._ksp.getPC().getFactorMatrix()
         status = factor.getMumpsInfog(1)  # the same on every process
         if status >= 0:
@@ -313,10 +353,14 @@ class DistributedGram:
                         "for; on Debian: apt-get install libmumps-ptscotch-5.5, which scripts/install-mpi installs)")
             raise SolverFailedError(f"MUMPS failed with INFOG(1) = {status}{hint}; its user guide lists the codes")
 
+        entries = COUNTERS["factor_entries"]
+
         def solve(v: np.ndarray) -> np.ndarray:
-            self._b.array[:] = v
-            self._ksp.solve(self._b, self._x)
-            return self._x.array.copy()
+            COUNTERS["entry_solves"] += entries
+            with _Counted("solve", "solves"):
+                self._b.array[:] = v
+                self._ksp.solve(self._b, self._x)
+                return self._x.array.copy()
 
         return solve
 
@@ -330,7 +374,8 @@ class DistributedGram:
 def _gather(part: np.ndarray, order: np.ndarray, counts: np.ndarray, comm: Any) -> np.ndarray:
     """The whole vector, on every process, from each process's ``part`` of the block order ``order``."""
     whole = np.empty(int(counts.sum()))
-    comm.Allgatherv(np.ascontiguousarray(part, dtype=float), [whole, counts])
+    with _Counted("collective", "collectives"):
+        comm.Allgatherv(np.ascontiguousarray(part, dtype=float), [whole, counts])
     out = np.empty_like(whole)
     out[order] = whole
     return out
@@ -381,6 +426,7 @@ def distributed_interior_point(matrix: sp.spmatrix, rhs: np.ndarray, lower: np.n
         normal.destroy()
         mat.destroy()
     assert part.lam is not None
+    COUNTERS["owned_iterations"] += float(mine.size + my_rows.size) * part.iterations
     y = _gather(part.y, partition.column_order, partition.column_counts, comm)
     lam = _gather(part.lam, partition.row_order, partition.row_counts, comm)
     if comm.Get_size() > 1:

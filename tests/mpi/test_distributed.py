@@ -245,10 +245,11 @@ def test_the_scaling_benchmark_measures_and_compares(grown, tmp_path):
     out = tmp_path / "measured"
     done = subprocess.run([sys.executable, str(HERE.parents[1] / "benchmarks" / "mpi_scaling.py"), "--states",
                            str(states), "--names", "2d-small", "--steps", "1", "--processes", "1,2", "--folder",
-                           str(out)], capture_output=True, text=True, env=environment(), timeout=600, cwd=tmp_path)
+                           str(out), "--profile"], capture_output=True, text=True, env=environment(), timeout=600, cwd=tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     text = (out / "mpi-scaling.md").read_text()
-    assert sum(line.startswith("| 2d-small |") for line in text.splitlines()) == 3 + 1  # 3 runs, 1 agreement
+    # 3 runs, their 3 lines of counts, 1 agreement
+    assert sum(line.startswith("| 2d-small |") for line in text.splitlines()) == 3 + 3 + 1
     agreement = [line for line in text.splitlines() if line.startswith("| 2d-small | 2 |")]
     cells = [c.strip() for c in agreement[0].strip("|").split("|")]
     assert cells[3] == "yes" and float(cells[4]) <= ROUNDING
@@ -258,3 +259,11 @@ def test_the_scaling_benchmark_measures_and_compares(grown, tmp_path):
     two = numbers["2d-small, 2 MPI processes, ipm-petsc"]
     assert len(two["cpu"]) == 2 and all(c > 0 for c in two["cpu"]) and all(f > 0 for f in two["flops"])
     assert all(b > 0 for b in two["sent"]) and all(m > 0 for m in two["memory"])
+    # the counts the model is built from: every process solved, multiplied and took part in collectives,
+    # and its own work is what is left of its CPU seconds
+    assert all(n > 0 for key in ("solves", "products", "collectives", "problems", "entry_solves", "owned_iterations",
+                                                                           "normal_cpu")
+               for n in two[key])
+    assert all(0 < own < cpu for own, cpu in zip(two["own"], two["cpu"], strict=True))
+    assert two["factorizations"][0] >= two["problems"][0]
+    assert "tottime" in (out / "profile-2d-small-ipm-petsc-2.txt").read_text()  # process 0's profile
