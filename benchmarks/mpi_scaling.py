@@ -104,7 +104,7 @@ for _ in range(steps):
 if profiler is not None:
     profiler.disable()
     text = io.StringIO()
-    pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(40)
+    pstats.Stats(profiler, stream=text).sort_stats("tottime").print_stats(80)
     open(profile_to, "w").write(text.getvalue())
 memory = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # MiB
 mine = dict(rows=rows, memory=memory)
@@ -240,7 +240,7 @@ def main(argv: list[str] | None = None) -> None:
                         help="also grow a 2D colony from one cell to this many cells in one process and on two, "
                              "and compare the runs (default: 0, not run)")
     parser.add_argument("--profile", action="store_true",
-                        help="profile process 0's timed steps (cProfile; its times are then inflated) and write the 40 "
+                        help="profile process 0's timed steps (cProfile; its times are then inflated) and write the 80 "
                              "functions of most own time of each run beside the table, profile-NAME-P.txt")
     parser.add_argument("--folder", type=Path, default=Path("mpi-scaling"),
                         help="where the table (mpi-scaling.md) and every process's numbers (mpi-scaling.json) are "
