@@ -128,8 +128,8 @@ def world() -> Any:
 #:   ``problems`` and ``factorizations`` their numbers;
 #: - ``factor_flops``: MUMPS's floating-point operations of elimination on this process (RINFO(3),
 #:   summed); ``factor_entries`` the entries of its last factor on this process (INFO(9));
-#:   ``entry_solves`` the factor entries on this process summed over the triangular solves (each
-#:   solve reads each entry twice, forward and back); ``factor_memory_mb`` its largest working
+#:   ``entry_solves`` the factor entries on this process, once for each triangular solve (which
+#:   reads each entry twice, forward and back); ``factor_memory_mb`` its largest working
 #:   memory on this process (INFO(16));
 #: - ``solves`` and ``solve_cpu``: MUMPS's triangular solves; ``normal_cpu`` the refills of the
 #:   normal matrix (PETSc's product of the row-scaled ``B̃`` with itself), one a factorization;
