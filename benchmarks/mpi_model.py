@@ -39,9 +39,10 @@ from one cell sums the step's time over the steps, the colony growing by e in
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -109,13 +110,20 @@ def growths(dimensions: int, flops_exponent: float | None, base: float
 
 
 def step_parts(c: Counts, cells: float, processes: float, latency: float, bandwidth: float,
-               flops: Callable[[float], float], entries: Callable[[float], float]) -> dict[str, float]:
-    """The seconds of one step of ``cells`` on ``processes``, phase by phase."""
+               flops: Callable[[float], float], entries: Callable[[float], float], divide: Collection[str] = (),
+               analysis_flops: float = 1.0) -> dict[str, float]:
+    """The seconds of one step of ``cells`` on ``processes``, phase by phase; ``divide``: what
+    is taken as divided among the processes beyond what is now (``"repeated"``: the own work
+    every process repeats; ``"analysis"``: MUMPS's analysis, whose parallel orderings make
+    ``analysis_flops`` times the numeric factorization's flops)."""
     x = cells / c.cells
     hops = math.log2(processes) if processes > 1 else 0.0
-    return {"own, repeated": c.repeated * x, "own, divided": c.divided * x / processes,
-            "analysis (one process)": c.analysis * x,
-            "numeric factorization": c.numeric * flops(cells) * c.flops_share / processes,
+    analysis = "analysis" in divide
+    return {"own, repeated": c.repeated * x / (processes if "repeated" in divide else 1.0),
+            "own, divided": c.divided * x / processes,
+            "analysis (one process)": c.analysis * x / (processes if analysis else 1.0),
+            "numeric factorization": c.numeric * flops(cells) * c.flops_share / processes
+            * (analysis_flops if analysis else 1.0),
             "triangular solves": c.solve * entries(cells) * c.entries_share / processes + c.solves * 2 * hops * latency,
             "products": c.product * x / processes + c.products * latency * (processes > 1),
             "normal matrix": c.normal * x / processes + c.factorizations * 2 * latency * (processes > 1),
@@ -139,6 +147,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--linearizations", type=float, default=None,
                         help="linearizations a step at the sizes modelled (default: the measured step's); every count "
                              "of a step scales with them")
+    parser.add_argument("--divide", default="",
+                        help="also model these divided among the processes, comma-separated: repeated (the own work "
+                             "every process repeats), analysis (MUMPS's analysis; its parallel orderings' extra flops: "
+                             "--analysis-flops); rows for each alone and for all together (default: none)")
+    parser.add_argument("--analysis-flops", type=float, default=1.22,
+                        help="the numeric factorization's flops with a parallel analysis, over the sequential one's "
+                             "(default: 1.22, PT-Scotch on 4 processes, docs/distributed.md)")
     parser.add_argument("--out", type=Path, default=None, help="also write the table here")
     args = parser.parse_args(argv)
     data = json.loads(args.measured.read_text())["per_process"]
@@ -159,13 +174,19 @@ def main(argv: list[str] | None = None) -> None:
              "grow by e.\n",
              "| P | " + " [s] | ".join(names) + " [s] | one step [s] | one cell to N [h] |",
              "|---:|" + "---:|" * (len(names) + 2)]
-    for processes in (float(x) for x in args.processes.split(",")):
-        parts = {k: v * per_step for k, v in
-                 step_parts(c, args.cells, processes, args.latency, args.bandwidth, flops, entries).items()}
-        grow = per_step * sum(sum(step_parts(c, n, processes, args.latency, args.bandwidth, flops, entries).values())
-                              for n in sizes)
-        lines.append(f"| {processes:g} | " + " | ".join(f"{v:.2f}" for v in parts.values())
-                     + f" | {sum(parts.values()):.1f} | {grow / 3600:.2f} |")
+    asked = [w for w in args.divide.split(",") if w]
+    if any(w not in ("repeated", "analysis") for w in asked):
+        parser.error(f"--divide: expected repeated and/or analysis, got {args.divide!r}")
+    variants = [()] + [(w,) for w in asked] + ([tuple(asked)] if len(asked) > 1 else [])
+    for divide in variants:
+        for processes in (float(x) for x in args.processes.split(",")):
+            at = functools.partial(step_parts, c, processes=processes, latency=args.latency, bandwidth=args.bandwidth,
+                                   flops=flops, entries=entries, divide=divide, analysis_flops=args.analysis_flops)
+            parts = {k: v * per_step for k, v in at(args.cells).items()}
+            grow = per_step * sum(sum(at(n).values()) for n in sizes)
+            label = f"{processes:g}" + (f", {' and '.join(divide)} divided" if divide else "")
+            lines.append(f"| {label} | " + " | ".join(f"{v:.2f}" for v in parts.values())
+                         + f" | {sum(parts.values()):.1f} | {grow / 3600:.2f} |")
     text = "\n".join(lines) + "\n"
     print(text)
     if args.out:

@@ -248,12 +248,26 @@ def test_the_distributed_model_is_built_from_counts_not_from_waiting(tmp_path):
     done = subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
                            "--out", str(out)], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr[-3000:]
-    rows = [line.split("|")[1:-1] for line in out.read_text().splitlines() if line.startswith("| 64 ")
-            or line.startswith("| 256 ")]
+    rows = [line.split("|")[1:-1] for line in out.read_text().splitlines() if line.startswith("| 64 |")
+            or line.startswith("| 256 |")]
     assert len(rows) == 2 and float(rows[1][-2]) < float(rows[0][-2])  # a step on 256 is shorter than on 64
     # a step of twice the linearizations costs twice as much
     again = tmp_path / "model-10.md"
     subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
                     "--linearizations", "10", "--out", str(again)], check=True, capture_output=True, timeout=120)
-    twice = [line.split("|")[1:-1] for line in again.read_text().splitlines() if line.startswith("| 64 ")]
+    twice = [line.split("|")[1:-1] for line in again.read_text().splitlines() if line.startswith("| 64 |")]
     assert float(twice[0][-2]) == pytest.approx(2 * float(rows[0][-2]), rel=1e-3)
+    # what if the repeated work and the analysis were divided too: each alone, then both
+    divided = mpi_model.step_parts(counts, 1e6, 256.0, 2e-6, 25e9, flops, entries, ("repeated", "analysis"), 1.5)
+    assert divided["own, repeated"] == pytest.approx(100.0 / 256)
+    assert divided["analysis (one process)"] == pytest.approx(200.0 / 256)
+    assert divided["numeric factorization"] == pytest.approx(1.5 * parts[256.0]["numeric factorization"])
+    whatif = tmp_path / "model-divided.md"
+    subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
+                    "--divide", "repeated,analysis", "--out", str(whatif)], check=True, capture_output=True,
+                   timeout=120)
+    labels = [line.split("|")[1].strip() for line in whatif.read_text().splitlines() if line.startswith("| 256")]
+    assert labels == ["256", "256, repeated divided", "256, analysis divided", "256, repeated and analysis divided"]
+    bad = subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
+                          "--divide", "gathers"], capture_output=True, text=True, timeout=120)
+    assert bad.returncode == 2 and "--divide" in bad.stderr
