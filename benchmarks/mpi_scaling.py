@@ -241,7 +241,7 @@ def main(argv: list[str] | None = None) -> None:
                              "and compare the runs (default: 0, not run)")
     parser.add_argument("--profile", action="store_true",
                         help="profile process 0's timed steps (cProfile; its times are then inflated) and write the 80 "
-                             "functions of most own time of each run beside the table, profile-NAME-P.txt")
+                             "functions of most own time of each run beside the table, profile-NAME-SOLVER-P.txt")
     parser.add_argument("--folder", type=Path, default=Path("mpi-scaling"),
                         help="where the table (mpi-scaling.md) and every process's numbers (mpi-scaling.json) are "
                              "written (default: ./mpi-scaling)")

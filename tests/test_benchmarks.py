@@ -220,13 +220,13 @@ def _process_counts(processes: int, own: float) -> dict[str, list[float]]:
             "linearizations": [5.0] * processes}
 
 
-def test_the_distributed_model_is_built_from_counts_not_from_waiting(tmp_path):
+def test_the_distributed_model_is_built_from_counts_not_from_waiting(tmp_path, monkeypatch):
     """benchmarks/mpi_model.py on made-up counts: the own work's repeated part is what does not fall
     with P, the analysis stays on one process, the factorization divides, and a larger colony costs
     more."""
     import json
 
-    sys.path.insert(0, str(BENCHMARKS))
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
     import mpi_model
 
     runs = {p: _process_counts(p, 1.0 + 8.0 / p) for p in (1, 2, 4, 8)}  # own work: 1 repeated, 8 divided

@@ -74,14 +74,16 @@ SENT: dict[str, float] = {"bytes": 0, "collectives": 0, "collective_cpu": 0.0}
 
 
 @contextmanager
-def _collective() -> Iterator[None]:
-    """Count a collective in :data:`SENT`, with the CPU seconds spent in it."""
+def counted(table: dict[str, float], key: str) -> Iterator[None]:
+    """Count the ``with`` block in ``table``: one more ``key + "s"`` and its CPU seconds
+    (``time.process_time``) added to ``key + "_cpu"`` (:data:`SENT`'s collectives, and the
+    distributed solver's counters, :data:`qpcontact.solvers.petsc.COUNTERS`)."""
     cpu = time.process_time()
     try:
         yield
     finally:
-        SENT["collectives"] += 1
-        SENT["collective_cpu"] += time.process_time() - cpu
+        table[key + "s"] += 1
+        table[key + "_cpu"] += time.process_time() - cpu
 
 
 def _nbytes(part: Any) -> int:
@@ -120,7 +122,7 @@ class Split:
 
         ops = {"total": MPI.SUM, "most": MPI.MAX}
         SENT["bytes"] += 16
-        with _collective():
+        with counted(SENT, "collective"):
             return float(self.comm.bcast(self.comm.reduce(float(value), op=ops[op], root=0), root=0))
 
     def total(self, value: float) -> float:
@@ -140,7 +142,7 @@ class Split:
 
         vector = np.ascontiguousarray(vector, dtype=float)
         out = np.empty_like(vector)
-        with _collective():
+        with counted(SENT, "collective"):
             self.comm.Reduce(vector, out, op=MPI.SUM, root=0)
             self.comm.Bcast(out, root=0)
         SENT["bytes"] += vector.nbytes * (2 if self.rank == 0 else 1)
@@ -181,7 +183,7 @@ class Split:
                                                  "shrink beyond what a step allows (its message is that process's)")
         counts = np.bincount(self.owner, minlength=self.size) * 7
         whole = np.empty(cells.n * 7)
-        with _collective():
+        with counted(SENT, "collective"):
             self.comm.Allgatherv(np.ascontiguousarray(local).ravel(), [whole, counts])
         SENT["bytes"] += local.nbytes
         out = np.empty((cells.n, 7))
@@ -194,7 +196,7 @@ class Split:
         if self.size == 1:
             return [part]
         SENT["bytes"] += _nbytes(part)
-        with _collective():
+        with counted(SENT, "collective"):
             return list(self.comm.allgather(part))
 
 

@@ -41,6 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InvalidArgumentError, NotInstalledError, SolverFailedError
+from ..geometry.regions import counted
 from . import cholesky
 from .ipm import MAX_ITERATIONS, UNKNOWNS_ACCURACY, Reductions, bounds_of, iterate_rows, make_rows
 from .registry import IterativeSolution, Problem, SolverOutput, SolverSpec, check_options, register
@@ -152,21 +153,6 @@ def reset_counters() -> None:
         "collectives", "collective_cpu", "gathered_bytes", "owned_iterations", "parallel_analysis")})
 
 
-class _Counted:
-    """Adds the CPU seconds of a ``with`` block to ``COUNTERS[key + "_cpu"]`` and one to
-    ``COUNTERS[count]``."""
-
-    def __init__(self, key: str, count: str) -> None:
-        self.key, self.count = key, count
-
-    def __enter__(self) -> None:
-        self._cpu = time.process_time()
-
-    def __exit__(self, *_: object) -> None:
-        COUNTERS[self.key + "_cpu"] += time.process_time() - self._cpu
-        COUNTERS[self.count] += 1
-
-
 reset_counters()
 
 
@@ -180,7 +166,7 @@ class _Reductions(Reductions):
         self.comm, self._ops = comm, {"total": MPI.SUM, "least": MPI.MIN, "most": MPI.MAX}
 
     def _all(self, value: float, op: str) -> float:
-        with _Counted("collective", "collectives"):
+        with counted(COUNTERS, "collective"):
             return float(self.comm.bcast(self.comm.reduce(float(value), op=self._ops[op], root=0), root=0))
 
     def total(self, value: float) -> float:
@@ -268,7 +254,7 @@ class _Operator:
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
         COUNTERS["halo_bytes"] += 8 * self.halo
-        with _Counted("product", "products"):
+        with counted(COUNTERS, "product"):
             self._in.array[:] = x
             (self.matrix.multTranspose if self.transpose else self.matrix.mult)(self._in, self._out)
             return self._out.array.copy()
@@ -357,7 +343,7 @@ class DistributedGram:
 
         def solve(v: np.ndarray) -> np.ndarray:
             COUNTERS["entry_solves"] += entries
-            with _Counted("solve", "solves"):
+            with counted(COUNTERS, "solve"):
                 self._b.array[:] = v
                 self._ksp.solve(self._b, self._x)
                 return self._x.array.copy()
@@ -374,7 +360,7 @@ class DistributedGram:
 def _gather(part: np.ndarray, order: np.ndarray, counts: np.ndarray, comm: Any) -> np.ndarray:
     """The whole vector, on every process, from each process's ``part`` of the block order ``order``."""
     whole = np.empty(int(counts.sum()))
-    with _Counted("collective", "collectives"):
+    with counted(COUNTERS, "collective"):
         comm.Allgatherv(np.ascontiguousarray(part, dtype=float), [whole, counts])
     out = np.empty_like(whole)
     out[order] = whole

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from qpcontact.geometry.contacts import candidate_pairs, evaluate_contacts, select_contacts
-from qpcontact.geometry.regions import ONE, Split, halo_width, region_pairs
+from qpcontact.geometry.regions import ONE, Split, counted, halo_width, region_pairs
 from qpcontact.simulation import Settings, run_colony
 
 
@@ -89,3 +89,18 @@ def test_two_processes_put_their_pairs_together_as_one_search_sorts_them(colonie
     assert np.all(np.diff(keys) > 0)
     assert _contacts(cells, together, 0.5) == _contacts(cells, candidate_pairs(cells, 0.5), 0.5)
     assert Split(_Two(1, None)).share(10) == slice(5, 10)
+
+
+def test_a_counted_block_adds_one_and_its_cpu_seconds_even_when_it_raises():
+    """What the MPI benchmarks' counts rest on: each block adds one to ``key + "s"`` and its CPU
+    seconds (not wall seconds: a sleep costs none) to ``key + "_cpu"``, also when it raises."""
+    import time
+
+    table = {"solves": 0.0, "solve_cpu": 0.0}
+    with counted(table, "solve"):
+        np.linalg.eigvalsh(np.random.default_rng(0).random((300, 300)))  # some CPU work
+        time.sleep(0.2)
+    assert table["solves"] == 1 and 0.0 < table["solve_cpu"] < 0.2
+    with pytest.raises(ValueError), counted(table, "solve"):
+        raise ValueError("inside")
+    assert table["solves"] == 2
