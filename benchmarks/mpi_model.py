@@ -156,12 +156,24 @@ def main(argv: list[str] | None = None) -> None:
                              "(default: 1.22, PT-Scotch on 4 processes, docs/distributed.md)")
     parser.add_argument("--out", type=Path, default=None, help="also write the table here")
     args = parser.parse_args(argv)
+    for name in ("cells", "latency", "bandwidth", "steps_per_efold", "linearizations", "analysis_flops"):
+        value = getattr(args, name)
+        if value is not None and not (value > 0 and math.isfinite(value)):
+            parser.error(f"--{name.replace('_', '-')}: expected a finite number > 0, got {value!r}")
+    if args.cells < 100:
+        parser.error(f"--cells: expected at least 100 (the growth is summed from 100 cells), got {args.cells:g}")
+    try:
+        processes = [float(x) for x in args.processes.split(",")]
+    except ValueError:
+        parser.error(f"--processes: expected numbers separated by commas, got {args.processes!r}")
+    if any(p < 1 for p in processes):
+        parser.error(f"--processes: expected numbers >= 1, got {args.processes!r}")
     data = json.loads(args.measured.read_text())["per_process"]
     runs = {int(k.split(", ")[1].split()[0]): v for k, v in data.items()
             if k.startswith(f"{args.state}, ") and "ipm-petsc" in k}
     c = counts_of(runs)
     flops, entries = growths(3 if args.state.startswith("3d") else 2, args.flops_exponent, c.cells)
-    per_step = (args.linearizations or c.linearizations) / c.linearizations
+    per_step = (c.linearizations if args.linearizations is None else args.linearizations) / c.linearizations
     g = 1.0 / args.steps_per_efold  # growth of ln N a step
     sizes = args.cells * np.exp(-g * np.arange(int(math.log(args.cells / 100.0) / g) + 1))
     names = list(step_parts(c, args.cells, 2.0, args.latency, args.bandwidth, flops, entries))
@@ -179,12 +191,12 @@ def main(argv: list[str] | None = None) -> None:
         parser.error(f"--divide: expected repeated and/or analysis, got {args.divide!r}")
     variants = [()] + [(w,) for w in asked] + ([tuple(asked)] if len(asked) > 1 else [])
     for divide in variants:
-        for processes in (float(x) for x in args.processes.split(",")):
-            at = functools.partial(step_parts, c, processes=processes, latency=args.latency, bandwidth=args.bandwidth,
+        for p in processes:
+            at = functools.partial(step_parts, c, processes=p, latency=args.latency, bandwidth=args.bandwidth,
                                    flops=flops, entries=entries, divide=divide, analysis_flops=args.analysis_flops)
             parts = {k: v * per_step for k, v in at(args.cells).items()}
             grow = per_step * sum(sum(at(n).values()) for n in sizes)
-            label = f"{processes:g}" + (f", {' and '.join(divide)} divided" if divide else "")
+            label = f"{p:g}" + (f", {' and '.join(divide)} divided" if divide else "")
             lines.append(f"| {label} | " + " | ".join(f"{v:.2f}" for v in parts.values())
                          + f" | {sum(parts.values()):.1f} | {grow / 3600:.2f} |")
     text = "\n".join(lines) + "\n"

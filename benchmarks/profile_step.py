@@ -40,6 +40,8 @@ from pathlib import Path
 
 from numpy import median
 
+from qpcontact.errors import InvalidArgumentError
+from qpcontact.simulation import Settings
 from qpcontact.studies.grown import machine
 
 CHILD = r"""
@@ -179,6 +181,10 @@ def main(argv: list[str] | None = None) -> None:
         changes = {name: json.loads(value) for name, _, value in (item.partition("=") for item in args.set)}
     except json.JSONDecodeError as error:
         parser.error(f"--set: expected NAME=JSON: {error}")
+    try:  # checked here, not only in the child: a bad name or value exits 2 with the setting's own message
+        Settings().updated(changes, "--set")
+    except InvalidArgumentError as error:
+        parser.error(str(error))
     if args.steps < 1:
         parser.error("--steps: expected an integer >= 1")
     for state in args.states:

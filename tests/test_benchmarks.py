@@ -134,6 +134,9 @@ def test_the_step_profile_writes_its_phase_table(tmp_path):
     rows = [line for line in out.read_text().splitlines() if line.startswith("| step_")]
     assert len(rows) == 1 and "%" in rows[0]
     assert "settings changed: {'position_early_tolerance': None}" in out.read_text()
+    bad = subprocess.run([sys.executable, str(BENCHMARKS / "profile_step.py"), str(latest_snapshot(tmp_path / "run")),
+                          "--set", "position_early_tolerances=null"], capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 2 and "position_early_tolerances" in bad.stderr
 
 
 def test_the_linearization_counts_compare_variants_from_a_state(tmp_path):
@@ -271,3 +274,8 @@ def test_the_distributed_model_is_built_from_counts_not_from_waiting(tmp_path, m
     bad = subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
                           "--divide", "gathers"], capture_output=True, text=True, timeout=120)
     assert bad.returncode == 2 and "--divide" in bad.stderr
+    for flag, value in (("--linearizations", "0"), ("--cells", "50"), ("--processes", "0,64"),
+                        ("--steps-per-efold", "nan")):
+        bad = subprocess.run([sys.executable, str(BENCHMARKS / "mpi_model.py"), str(measured), "--state", "2d-10000",
+                              flag, value], capture_output=True, text=True, timeout=120)
+        assert bad.returncode == 2 and flag in bad.stderr, (flag, bad.stderr)
